@@ -1,0 +1,263 @@
+"""The end-to-end reconstruction of Algorithm 1 on recordings, and the GMC-SINDy baseline."""
+
+from dataclasses import dataclass, field
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._errors import GMRInputError
+from ._solution import RESULTS
+from .coordination._coordinate import coordinate, split_flat
+from .local._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, Library
+from .local._local_fit import AutoThreshold, LocalFit, fit_local
+from .local._stls import STLS, compress, stls_qr
+from .local._threshold import default_thresholds, select_threshold
+from .model._model import GlobalModel
+from .recordings._recording import Recording, validate
+
+#: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
+DEFAULT_SOLVER = STLS(threshold=0.1, alpha=0.0, normalize_columns=True, unbias=True)
+
+
+def regression_targets(rec: Recording, masses: np.ndarray, topology: str) -> np.ndarray:
+    """Force carried by each DOF (N, D): input force minus inertia, the left side of Eq. (8).
+
+    Independent: force_i - m_i a_i. Chain: sum_{k>=i} (force_k - m_k a_k), i.e. H a with H of
+    Eq. (9) written for base-first numbering."""
+    _, f = rec.inputs()
+    per_mass = f - rec.a * masses[None, :]
+    if topology == "independent":
+        return per_mass
+    return np.cumsum(per_mass[:, ::-1], axis=1)[:, ::-1]
+
+
+def _resolve(recordings, masses, topology, min_recordings=2, what="fit"):
+    if len(recordings) == 0:
+        raise GMRInputError("no recordings given: pass one recording per equilibrium")
+    recs = [validate(r, r.name) for r in recordings]
+    d = recs[0].n_dof
+    for r in recs:
+        if r.n_dof != d:
+            raise GMRInputError(f"{r.name}: has {r.n_dof} DOFs but {recs[0].name} has {d}")
+    if topology is None:
+        topology = "chain" if d > 1 else "independent"
+    if masses is None:
+        found = [r.masses for r in recs if r.masses is not None]
+        masses = found[0] if found else np.ones(d)
+    masses = np.asarray(masses, float).reshape(-1)
+    if masses.shape[0] != d or np.any(masses <= 0) or not np.all(np.isfinite(masses)):
+        raise GMRInputError(f"masses must be {d} positive numbers, got {masses.tolist()}")
+    recs = [r.complete(topology) for r in recs]
+    if len(recs) < min_recordings:
+        raise GMRInputError(
+            f"only {len(recs)} recording(s): the coordination needs small-vibration recordings "
+            f"around at least two distinct equilibria (one file per equilibrium)"
+        )
+    return recs, masses, topology
+
+
+def group_wells(means: np.ndarray, tol: float) -> np.ndarray:
+    """Label recordings whose mean deformation differs by less than `tol` as the same well;
+    labels ordered by increasing deformation."""
+    order = np.argsort(means)
+    labels = np.empty(len(means), int)
+    current, last = -1, None
+    for i in order:
+        if last is None or means[i] - last > tol:
+            current += 1
+        labels[i] = current
+        last = means[i]
+    return labels
+
+
+def _pad_stack(chunks: list[list[np.ndarray]]):
+    """Concatenate each group's arrays and pad groups to one length (weight 0 on padding)."""
+    cat = [np.concatenate(c) for c in chunks]
+    n = max(c.shape[0] for c in cat)
+    out = np.zeros((len(cat), n))
+    w = np.zeros((len(cat), n))
+    for i, c in enumerate(cat):
+        out[i, : c.shape[0]] = c
+        w[i, : c.shape[0]] = 1.0
+    return out, w
+
+
+@dataclass
+class DofReport:
+    """What the reconstruction did for one DOF (cell)."""
+
+    equilibria: np.ndarray
+    local_coef: np.ndarray
+    local_stderr: np.ndarray
+    thresholds: np.ndarray
+    recordings_per_well: list
+    stats: dict = field(default_factory=dict)
+
+
+@dataclass
+class Reconstruction:
+    """Result of `reconstruct` / `gmc_sindy`: the `model` and per-DOF diagnostics."""
+
+    model: GlobalModel
+    method: str
+    library: Library
+    dofs: list
+    training: dict = field(default_factory=dict)
+
+
+def _model_from_blocks(masses, topology, stiff, vdamp, pdamp, stderr=None) -> GlobalModel:
+    return GlobalModel(
+        masses=jnp.asarray(masses),
+        stiffness=jnp.asarray(np.stack(stiff)),
+        velocity_damping=jnp.asarray(np.stack(vdamp)),
+        position_damping=jnp.asarray(np.stack(pdamp)),
+        topology=topology,
+        stderr=stderr,
+    )
+
+
+def training_scores(model: GlobalModel, recs, masses, topology) -> dict:
+    """R² and NRMSE of the model force against the measured force, per recording and DOF."""
+    out = {}
+    for r in recs:
+        y = regression_targets(r, masses, topology)
+        yhat = np.asarray(jax.vmap(model.force)(jnp.asarray(r.x), jnp.asarray(r.v)))
+        resid = np.sum((y - yhat) ** 2, axis=0)
+        total = np.sum((y - y.mean(axis=0)) ** 2, axis=0)
+        out[r.name] = {"r2": (1 - resid / total).tolist(), "nrmse": np.sqrt(resid / total).tolist()}
+    return out
+
+
+def _fit_wells(xs, vs, ys, w, library, solver, select):
+    # One jitted fit per well (same shapes: compiled once), stacked. A vmap over wells with
+    # batched weights and the CV threshold sweep stalled in XLA:CPU (jax 0.10), so loop here.
+    sols = [fit_local(xs[k], vs[k], ys[k], library, solver, select, weights=w[k], throw=False)
+            for k in range(xs.shape[0])]
+    return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *sols)
+
+
+def reconstruct(
+    recordings: list[Recording],
+    library: Library = Library(5, 5),
+    solver: STLS = DEFAULT_SOLVER,
+    select: AutoThreshold | None = AutoThreshold(),
+    *,
+    topology: str | None = None,
+    masses=None,
+    well_tol: float = 0.1,
+) -> Reconstruction:
+    """Global model reconstruction, Algorithm 1, from small-vibration recordings.
+
+    **Arguments:**
+
+    - `recordings`: one per equilibrium (single DOF) or per configuration (chain). Missing
+      v/a are estimated from x (Savitzky-Golay).
+    - `library`: local library orders r, d (Eqs. 5-7).
+    - `solver`, `select`: STLS settings; `select=None` uses `solver.threshold` as given.
+    - `topology`: "chain" (default for several DOFs) or "independent".
+    - `masses`: per DOF; default from the recordings, else 1 (per unit mass).
+    - `well_tol`: recordings whose mean deformation of a cell differs by less than this
+      fraction of that cell's spread are taken as the same well of that cell and pooled.
+
+    **Returns:** a `Reconstruction` with the `GlobalModel` (standard errors attached) and per-DOF
+    reports (equilibria, local coefficients, global orders, condition numbers).
+    """
+    recs, masses, topology = _resolve(recordings, masses, topology)
+    d = recs[0].n_dof
+    targets = [regression_targets(r, masses, topology) for r in recs]
+    stiff, vdamp, pdamp, se_s, se_v, se_p, reports = [], [], [], [], [], [], []
+    for i in range(d):
+        means = np.array([r.x[:, i].mean() for r in recs])
+        spread = np.ptp(means)
+        labels = group_wells(means, well_tol * spread if spread > 0 else 0.0)
+        n_wells = labels.max() + 1
+        if n_wells < 2:
+            raise GMRInputError(
+                f"DOF {i}: all recordings are around the same equilibrium (mean x = {means.mean():.4g}); "
+                f"the coordination needs recordings around at least two distinct equilibria"
+            )
+        groups = [[k for k in range(len(recs)) if labels[k] == w] for w in range(n_wells)]
+        xs, w = _pad_stack([[recs[k].x[:, i] for k in g] for g in groups])
+        vs, _ = _pad_stack([[recs[k].v[:, i] for k in g] for g in groups])
+        ys, _ = _pad_stack([[targets[k][:, i] for k in g] for g in groups])
+        sols = _fit_wells(jnp.asarray(xs), jnp.asarray(vs), jnp.asarray(ys), jnp.asarray(w), library, solver, select)
+        fits: LocalFit = sols.value
+        bad = np.asarray(sols.result._value) != RESULTS.successful._value
+        if np.any(bad):
+            k = int(np.argmax(bad))
+            raise GMRInputError(f"DOF {i}, well {k}: local fit failed: {RESULTS[sols.result[k]]}")
+        coord = coordinate(fits, library, throw=False)
+        if coord.result != RESULTS.successful:
+            raise GMRInputError(
+                f"DOF {i}: {RESULTS[coord.result]} (equilibria {np.asarray(fits.equilibrium).round(6).tolist()}, "
+                f"condition numbers {float(coord.stats['cond_r']):.3g}/{float(coord.stats['cond_d']):.3g}); "
+                f"use lower library orders or a larger threshold"
+            )
+        g = coord.value
+        se = split_flat(jnp.sqrt(jnp.clip(jnp.diag(coord.aux), 0.0)), g)
+        stiff.append(np.asarray(g.stiffness)), vdamp.append(np.asarray(g.velocity_damping))
+        pdamp.append(np.asarray(g.position_damping))
+        se_s.append(np.asarray(se.stiffness)), se_v.append(np.asarray(se.velocity_damping))
+        se_p.append(np.asarray(se.position_damping))
+        reports.append(DofReport(
+            equilibria=np.asarray(fits.equilibrium),
+            local_coef=np.asarray(fits.coef),
+            local_stderr=np.sqrt(np.clip(np.diagonal(np.asarray(fits.covariance), axis1=1, axis2=2), 0, None)),
+            thresholds=np.asarray(fits.threshold),
+            recordings_per_well=[[recs[k].name for k in g] for g in groups],
+            stats={k: np.asarray(v).tolist() for k, v in coord.stats.items()},
+        ))
+    stderr = {STIFFNESS: jnp.asarray(np.stack(se_s)), VELOCITY_DAMPING: jnp.asarray(np.stack(se_v)),
+              POSITION_DAMPING: jnp.asarray(np.stack(se_p))}
+    model = _model_from_blocks(masses, topology, stiff, vdamp, pdamp, stderr)
+    return Reconstruction(model, "GMR", library, reports, training_scores(model, recs, masses, topology))
+
+
+def coefficients_to_blocks(coef: np.ndarray, library: Library):
+    """Place a library coefficient vector into (stiffness, velocity_damping, position_damping)."""
+    coef = np.asarray(coef)
+    s = np.zeros(library.restoring_order + 1)
+    v = np.zeros(library.damping_order + 1)
+    p = np.zeros(library.damping_order + 1)
+    for c, (phys, k) in zip(coef, library.terms()):
+        {STIFFNESS: s, VELOCITY_DAMPING: v, POSITION_DAMPING: p}[phys][k] = c
+    return s, v, p
+
+
+def gmc_sindy(
+    recordings: list[Recording],
+    library: Library = Library(7, 7),
+    solver: STLS = DEFAULT_SOLVER,
+    select: AutoThreshold | None = AutoThreshold(),
+    *,
+    topology: str | None = None,
+    masses=None,
+) -> Reconstruction:
+    """The paper's baseline (GMC-SINDy with data assembly, Sec. 2.1): all recordings stacked
+    in global coordinates, one global library Θ(x, v), one STLS fit per DOF. Same threshold
+    rule as `reconstruct`, so the comparison isolates the method."""
+    recs, masses, topology = _resolve(recordings, masses, topology, min_recordings=1)
+    d = recs[0].n_dof
+    targets = [regression_targets(r, masses, topology) for r in recs]
+    stiff, vdamp, pdamp, reports = [], [], [], []
+    for i in range(d):
+        x = jnp.asarray(np.concatenate([r.x[:, i] for r in recs]))
+        v = jnp.asarray(np.concatenate([r.v[:, i] for r in recs]))
+        y = jnp.asarray(np.concatenate([t[:, i] for t in targets]))
+        theta = library(x, v)
+        slv = solver
+        if select is not None:
+            grid = default_thresholds(theta, y, select.n_grid, select.lo)
+            sel = select_threshold(theta, y, grid, solver, n_folds=select.n_folds)
+            slv = STLS(sel.value, solver.alpha, solver.max_iter, solver.normalize_columns, solver.unbias)
+        sol = stls_qr(compress(theta, y), slv)
+        s, v_, p = coefficients_to_blocks(np.asarray(sol.value), library)
+        stiff.append(s), vdamp.append(v_), pdamp.append(p)
+        reports.append(DofReport(equilibria=np.array([]), local_coef=np.asarray(sol.value)[None],
+                                 local_stderr=np.full((1, library.n_terms), np.nan),
+                                 thresholds=np.asarray(slv.threshold)[None], recordings_per_well=[],
+                                 stats={"result": RESULTS[sol.result]}))
+    model = _model_from_blocks(masses, topology, stiff, vdamp, pdamp)
+    return Reconstruction(model, "GMC-SINDy", library, reports, training_scores(model, recs, masses, topology))

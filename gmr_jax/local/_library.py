@@ -1,0 +1,98 @@
+"""Candidate function libraries, paper Eqs. (5)-(7)."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._custom_types import Array, Float
+
+# `physics` names of the "gmr-model/1" format, per family.
+STIFFNESS = "stiffness"
+VELOCITY_DAMPING = "velocity_damping"
+POSITION_DAMPING = "position_damping"
+
+
+def signed_power(v, j: int, sign_eps: float = 0.0):
+    """sgn(v)|v|^j (Eq. 7); with `sign_eps > 0`, sgn is smoothed to tanh(v / sign_eps)."""
+    s = jnp.sign(v) if sign_eps == 0.0 else jnp.tanh(v / sign_eps)
+    if j == 0:
+        return s
+    if j % 2 == 1:
+        return v**j if sign_eps == 0.0 else s * jnp.abs(v) ** j
+    return s * jnp.abs(v) ** j
+
+
+class Library(eqx.Module):
+    """Polynomial library of the paper, Eqs. (5)-(7).
+
+    Columns, in order: restoring `x^k`, k = 0..`restoring_order` (Eq. 6); position-independent
+    damping `sgn(v)|v|^j`, j = 0..`damping_order`; position-dependent damping `x^j v`,
+    j = 1..`damping_order` (Eq. 7 written with x^j v rather than |x|^j |v|, so that a shift
+    of x keeps it a polynomial, which the coordination needs; j = 0 is the viscous term,
+    already in the previous family).
+
+    **Arguments:**
+
+    - `restoring_order`: r, highest power of the restoring polynomial.
+    - `damping_order`: d, highest power of both damping families.
+    - `velocity_damping`, `position_damping`: include those families.
+    """
+
+    restoring_order: int = eqx.field(static=True, default=5)
+    damping_order: int = eqx.field(static=True, default=5)
+    velocity_damping: bool = eqx.field(static=True, default=True)
+    position_damping: bool = eqx.field(static=True, default=True)
+
+    def terms(self) -> list[tuple[str, int]]:
+        """(physics, order) of every column, in column order."""
+        out = [(STIFFNESS, k) for k in range(self.restoring_order + 1)]
+        if self.velocity_damping:
+            out += [(VELOCITY_DAMPING, j) for j in range(self.damping_order + 1)]
+        if self.position_damping:
+            out += [(POSITION_DAMPING, j) for j in range(1, self.damping_order + 1)]
+        return out
+
+    @property
+    def n_terms(self) -> int:
+        return len(self.terms())
+
+    def names(self, x: str = "x", v: str = "v") -> list[str]:
+        return [term_name(p, k, x, v) for p, k in self.terms()]
+
+    def indices(self, physics: str) -> np.ndarray:
+        return np.array([i for i, (p, _) in enumerate(self.terms()) if p == physics], dtype=int)
+
+    def orders(self, physics: str) -> np.ndarray:
+        return np.array([k for p, k in self.terms() if p == physics], dtype=int)
+
+    def __call__(
+        self, x: Float[Array, " samples"], v: Float[Array, " samples"], sign_eps: float = 0.0
+    ) -> Float[Array, "samples terms"]:
+        cols = []
+        for p, k in self.terms():
+            if p == STIFFNESS:
+                cols.append(x**k)
+            elif p == VELOCITY_DAMPING:
+                cols.append(signed_power(v, k, sign_eps))
+            else:
+                cols.append(x**k * v)
+        return jnp.stack(cols, axis=-1)
+
+
+def term_name(physics: str, order: int, x: str = "x", v: str = "v") -> str:
+    """Readable name of one basis function, e.g. `x^3`, `sgn(v)|v|^2`, `x^2*v`."""
+
+    def pw(s, k):
+        return "1" if k == 0 else (s if k == 1 else f"{s}^{k}")
+
+    if physics == STIFFNESS:
+        return pw(x, order)
+    if physics == VELOCITY_DAMPING:
+        if order == 0:
+            return f"sgn({v})"
+        if order % 2 == 1:
+            return pw(v, order)
+        return f"sgn({v})|{v}|^{order}" if order > 1 else f"|{v}|"
+    if physics == POSITION_DAMPING:
+        return f"{pw(x, order)}*{v}" if order else v
+    return f"{physics}[{order}]"

@@ -1,0 +1,94 @@
+"""Excitations: base motion and forces on the masses, as functions of time."""
+
+import abc
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+
+class AbstractInput(eqx.Module):
+    """An excitation: `__call__(t)` gives (base acceleration, force on each mass (dof,))."""
+
+    n_dof: eqx.AbstractVar[int]
+
+    @abc.abstractmethod
+    def __call__(self, t) -> tuple[Float[Array, ""], Float[Array, " dof"]]:
+        """(base_acc, force) at time t."""
+
+    def jump_times(self) -> Float[Array, " jumps"] | None:
+        """Times where the input is discontinuous (declared to the step-size controller)."""
+        return None
+
+
+class NoInput(AbstractInput):
+    n_dof: int = eqx.field(static=True, default=1)
+
+    def __call__(self, t):
+        return jnp.zeros(()), jnp.zeros(self.n_dof)
+
+
+class BaseChirp(AbstractInput):
+    """Base displacement x_b = A sin(2π(f0 t + (f1 - f0) t² / (2T))): a linear sweep
+    (the paper's sweep excitation). Gives the analytic base acceleration."""
+
+    amplitude: Float[Array, ""] | float
+    f0: float
+    f1: float
+    duration: float
+    n_dof: int = eqx.field(static=True, default=1)
+
+    def __call__(self, t):
+        k = (self.f1 - self.f0) / self.duration
+        phase = 2 * jnp.pi * (self.f0 * t + 0.5 * k * t**2)
+        w = 2 * jnp.pi * (self.f0 + k * t)
+        wd = 2 * jnp.pi * k
+        acc = self.amplitude * (-(w**2) * jnp.sin(phase) + wd * jnp.cos(phase))
+        return acc, jnp.zeros(self.n_dof)
+
+    def displacement(self, t):
+        k = (self.f1 - self.f0) / self.duration
+        return self.amplitude * jnp.sin(2 * jnp.pi * (self.f0 * t + 0.5 * k * t**2))
+
+
+class BaseSine(AbstractInput):
+    """Harmonic base displacement A sin(2π f t) (transmissibility, paper Eq. 24)."""
+
+    amplitude: Float[Array, ""] | float
+    frequency: Float[Array, ""] | float
+    n_dof: int = eqx.field(static=True, default=1)
+
+    def __call__(self, t):
+        w = 2 * jnp.pi * self.frequency
+        return -self.amplitude * w**2 * jnp.sin(w * t), jnp.zeros(self.n_dof)
+
+
+class HalfSineTip(AbstractInput):
+    """Paper Eq. (25): tip force A sin(2π f t) for t <= 1/(2f), then 0, on the last mass."""
+
+    frequency: Float[Array, ""] | float
+    amplitude: Float[Array, ""] | float
+    n_dof: int = eqx.field(static=True, default=1)
+
+    def __call__(self, t):
+        on = t <= 0.5 / self.frequency
+        f = jnp.where(on, self.amplitude * jnp.sin(2 * jnp.pi * self.frequency * t), 0.0)
+        return jnp.zeros(()), jnp.zeros(self.n_dof).at[-1].set(f)
+
+    def jump_times(self):
+        return jnp.reshape(0.5 / jnp.asarray(self.frequency, float), (1,))
+
+
+class Sampled(AbstractInput):
+    """Measured inputs, linearly interpolated between samples (zero after the last)."""
+
+    t: Float[Array, " samples"]
+    base_acc: Float[Array, " samples"]
+    force: Float[Array, "samples dof"]
+    n_dof: int = eqx.field(static=True, default=1)
+
+    def __call__(self, t):
+        inside = t <= self.t[-1]
+        b = jnp.where(inside, jnp.interp(t, self.t, self.base_acc), 0.0)
+        f = jnp.stack([jnp.interp(t, self.t, self.force[:, i]) for i in range(self.n_dof)])
+        return b, jnp.where(inside, f, 0.0)
