@@ -1,0 +1,47 @@
+"""gmr_jax: global model reconstruction of multi-stable structures from local small vibrations.
+
+Importing gmr_jax enables JAX float64 (`jax_enable_x64`): the numerics need it.
+"""
+
+from . import _config as _config  # noqa: F401  (enables x64 first)
+from ._errors import GMRInputError as GMRInputError
+from ._reconstruct import (
+    DEFAULT_SOLVER as DEFAULT_SOLVER,
+    Reconstruction as Reconstruction,
+    gmc_sindy as gmc_sindy,
+    reconstruct as reconstruct,
+    regression_targets as regression_targets,
+)
+from ._solution import RESULTS as RESULTS, Solution as Solution
+from .coordination._coordinate import GlobalCoefficients as GlobalCoefficients, coordinate as coordinate
+from .coordination._hermite import hermite_interpolate as hermite_interpolate
+from .local._library import Library as Library
+from .local._local_fit import AutoThreshold as AutoThreshold, LocalFit as LocalFit, fit_local as fit_local
+from .local._stls import STLS as STLS, stls as stls
+from .local._threshold import select_threshold as select_threshold
+from .model._io import load_model as load_model, save_model as save_model
+from .model._model import (
+    AbstractMechanicalModel as AbstractMechanicalModel,
+    GlobalModel as GlobalModel,
+    from_terms as from_terms,
+)
+from .recordings._derivatives import differentiate as differentiate
+from .recordings._noise import add_noise as add_noise
+from .recordings._recording import (
+    Recording as Recording,
+    load_recording as load_recording,
+    save_recording as save_recording,
+)
+from .simulate._inputs import (
+    AbstractInput as AbstractInput,
+    BaseChirp as BaseChirp,
+    BaseSine as BaseSine,
+    HalfSineTip as HalfSineTip,
+    NoInput as NoInput,
+    Sampled as Sampled,
+)
+from .simulate._simulate import Integrator as Integrator, simulate as simulate
+from .systems._paper_cases import bistable_joint as bistable_joint, tristable_nes as tristable_nes
+from .systems._system import System as System, make_recordings as make_recordings
+
+__version__ = "0.1.0"
