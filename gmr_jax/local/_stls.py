@@ -82,23 +82,33 @@ def masked_lstsq(r, z, mask, alpha):
 def _stls_core(r, z, threshold, alpha, max_iter: int, unbias: bool, initial_mask=None):
     p = r.shape[1]
     mask0 = jnp.ones(p, bool) if initial_mask is None else initial_mask
+    # The support search is piecewise constant in the data: run it on stop-gradient copies, so
+    # the while_loop carries no tangents (reverse-mode AD cannot go through a while_loop), and
+    # recompute the returned coefficients from the final supports outside the loop.
+    rs, zs = jax.lax.stop_gradient(r), jax.lax.stop_gradient(z)
+    ths, als = jax.lax.stop_gradient(threshold), jax.lax.stop_gradient(alpha)
 
     def body(carry):
         mask, _, it, _ = carry
-        c = masked_lstsq(r, z, mask, alpha)
-        new = mask & (jnp.abs(c) >= threshold)
-        c = jnp.where(new, c, 0.0)
+        c = masked_lstsq(rs, zs, mask, als)
+        new = mask & (jnp.abs(c) >= ths)
         changed = jnp.any(new != mask)
-        return new, c, it + 1, changed
+        return new, mask, it + 1, changed
 
     def cond(carry):
         mask, _, it, changed = carry
         return changed & (it < max_iter) & jnp.any(mask)
 
-    init = (mask0, jnp.zeros(p, z.dtype), jnp.asarray(0), jnp.asarray(True))
-    mask, c, n_iter, changed = jax.lax.while_loop(cond, body, init)
+    init = (mask0, mask0, jnp.asarray(0), jnp.asarray(True))
+    mask, prev, n_iter, changed = jax.lax.while_loop(cond, body, init)
     if unbias:
-        c = jnp.where(jnp.any(mask), masked_lstsq(r, z, mask, 0.0), c)
+        c = masked_lstsq(r, z, mask, 0.0)
+    else:
+        # The last iterate: ridge on the previous support, thresholded to the final one
+        # (identical to a ridge refit on the final support once converged).
+        c = masked_lstsq(r, z, prev, alpha)
+    ran = n_iter > 0
+    c = jnp.where(mask & (ran | unbias), c, 0.0)
     converged = (~changed) | (~jnp.any(mask))
     return c, mask, n_iter, converged
 
@@ -126,7 +136,9 @@ def stls_qr(
     coef = cn / norms
     resid = rn @ cn - qr.z
     rss = jnp.maximum(qr.yy - jnp.sum(qr.z**2), 0.0) + jnp.sum(resid**2)
-    finite = jnp.all(jnp.isfinite(coef))
+    # A NaN in the data thresholds every coefficient away (NaN >= t is false), leaving finite
+    # zeros: check the residual too, which carries the NaN.
+    finite = jnp.all(jnp.isfinite(coef)) & jnp.isfinite(rss)
     result = RESULTS.where(converged, RESULTS.successful, RESULTS.max_iterations_reached)
     result = RESULTS.where(finite, result, RESULTS.nonfinite)
     coef = jnp.where(finite, coef, jnp.nan)

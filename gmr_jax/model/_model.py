@@ -1,6 +1,7 @@
 """The global mechanical model (paper Eq. 1), in the "gmr-model/1" term vocabulary."""
 
 import abc
+import dataclasses
 
 import equinox as eqx
 import jax
@@ -105,7 +106,7 @@ class GlobalModel(AbstractMechanicalModel):
 
     def with_sign_eps(self, eps: float) -> "GlobalModel":
         """A copy whose sgn(v) terms are smoothed to tanh(v/eps) (for differentiation)."""
-        return eqx.tree_at(lambda m: m.sign_eps, self, eps)
+        return dataclasses.replace(self, sign_eps=float(eps))
 
     # -- readable form ---------------------------------------------------------------
     def terms(self, tol: float = 0.0) -> list[dict]:

@@ -1,0 +1,173 @@
+"""Explore GMR and GMC-SINDy on the Kresling chain benchmarks (issue "Multi-DOF chains").
+
+For each amplitude: base-sweep recordings around the fully folded and fully deployed
+configurations (`make_recordings`), then `reconstruct` (GMR) and `gmc_sindy`, and per cell:
+
+- the amplitude ratio (half peak-to-peak of the vibration / interwell distance L), per well;
+- the relative L2 error of the restoring force over the folding range x in [-0.1 L, 1.1 L];
+- the relative L2 error of the damping force over that range x the v box of the system;
+- the model's equilibria in that range and their stability against the truth's (folded 0,
+  saddle, deployed L), and the energy barrier.
+
+Usage:
+    python benchmarks/explore_kresling.py [--system kresling5|kresling3] [--twist linear|torque_free]
+        [--amp 3e-4 5e-4] [--snr 60] [--r 5 --d 5] [--seed 0] [--json OUT.json]
+"""
+
+import argparse
+import json
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import gmr_jax
+from gmr_jax.systems._kresling import cell_equilibria, kresling3, kresling5
+
+
+def model_equilibria(stiffness_coef, lo, hi, n=4001):
+    """Zeros of a global restoring polynomial in [lo, hi] and their stability (F' > 0)."""
+    x = np.linspace(lo, hi, n)
+    p = np.polynomial.Polynomial(stiffness_coef)
+    f = p(x)
+    roots = []
+    for i in np.nonzero(np.sign(f[1:]) != np.sign(f[:-1]))[0]:
+        a, b = x[i], x[i + 1]
+        for _ in range(60):
+            m = 0.5 * (a + b)
+            if np.sign(p(m)) == np.sign(p(a)):
+                a = m
+            else:
+                b = m
+        roots.append(0.5 * (a + b))
+    dp = p.deriv()
+    return [(float(r), bool(dp(r) > 0)) for r in roots]
+
+
+def barrier_of_poly(coef, x0, xu):
+    P = np.polynomial.Polynomial(coef).integ()
+    return float(P(xu) - P(x0))
+
+
+def shift_recordings(recs, offset):
+    """Measure each cell's deformation from another origin: x -> x + offset (per cell)."""
+    from dataclasses import replace
+
+    return [replace(r, x=r.x + offset[None, :]) for r in recs]
+
+
+def evaluate(system, rec_model, n_grid=801, n_v=41, offset=None):
+    truth = system.truth
+    d = truth.n_dof
+    eq = cell_equilibria(truth)
+    out = []
+    for i in range(d):
+        lo, hi = system.x_range[i]
+        xs = np.linspace(lo, hi, n_grid)
+        cell = jax.tree_util.tree_map(lambda a: a[i], truth.cells)
+        f_true = np.asarray(jax.vmap(cell.force)(jnp.asarray(xs)))
+        off = 0.0 if offset is None else float(offset[i])
+        coef = np.asarray(rec_model.stiffness[i])
+        if off:  # express the model in the truth's coordinate: F(x) = P(x + off)
+            coef = np.polynomial.Polynomial(coef)(np.polynomial.Polynomial([off, 1.0])).coef
+        f_mod = np.polynomial.Polynomial(coef)(xs)
+        err_r = float(np.linalg.norm(f_mod - f_true) / np.linalg.norm(f_true))
+        # damping over the (x, v) box
+        vs = np.linspace(*system.v_range[i], n_v)
+        X, V = np.meshgrid(xs[::10], vs, indexing="ij")
+        fd_true = np.asarray(jax.vmap(cell.damping)(jnp.asarray(X.ravel()), jnp.asarray(V.ravel())))
+        xx = jnp.zeros((X.size, d)).at[:, i].set(jnp.asarray(X.ravel()))
+        vv = jnp.zeros((X.size, d)).at[:, i].set(jnp.asarray(V.ravel()))
+        fd_mod = np.asarray(jax.vmap(rec_model.damping)(xx + off, vv))[:, i]
+        err_d = float(np.linalg.norm(fd_mod - fd_true) / np.linalg.norm(fd_true))
+        roots = model_equilibria(coef, lo, hi)
+        stable = [r for r, s in roots if s]
+        unstable = [r for r, s in roots if not s]
+        L = eq["stable"][i, 1]
+        # match: exactly 2 stable (near 0 and L) and 1 unstable between them
+        ok = (len(stable) == 2 and len(unstable) == 1 and abs(stable[0]) < 0.1 * L
+              and abs(stable[1] - L) < 0.1 * L and stable[0] < unstable[0] < stable[1])
+        barrier = barrier_of_poly(coef, stable[0], unstable[0]) if ok else float("nan")
+        out.append({
+            "cell": i + 1, "restoring_rel_l2": err_r, "damping_rel_l2": err_d,
+            "stable": stable, "unstable": unstable, "equilibria_match": bool(ok),
+            "stable_err_over_L": [float(stable[0] / L), float((stable[1] - L) / L)] if ok else None,
+            "saddle_err_over_L": float((unstable[0] - eq["unstable"][i]) / L) if ok else None,
+            "barrier_rel_err": float(barrier / eq["barrier"][i] - 1) if ok else None,
+        })
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--system", default="kresling5")
+    ap.add_argument("--twist", default="linear")
+    ap.add_argument("--amp", type=float, nargs="+", default=[3e-4, 5e-4, 1e-3])
+    ap.add_argument("--snr", type=float, default=60.0, help="dB; <= 0 for noise free")
+    ap.add_argument("--r", type=int, default=5)
+    ap.add_argument("--d", type=int, default=5)
+    ap.add_argument("--gmc-r", type=int, default=None)
+    ap.add_argument("--gmc-d", type=int, default=None)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--no-gmc", action="store_true")
+    ap.add_argument("--origin", default="folded", choices=["folded", "base"],
+                    help="coordinate origin given to the fits: the folded state (x = h - h_f, the "
+                         "system's own) or the cell's base plate (x = h, absolute height)")
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args()
+    system = {"kresling5": kresling5, "kresling3": kresling3}[args.system](twist=args.twist)
+    L = np.asarray(system.truth.interwell)
+    eq = cell_equilibria(system.truth)
+    print(f"{system.name}: L = {np.round(L * 1e3, 2)} mm, saddle = {np.round(eq['unstable'] * 1e3, 2)} mm, "
+          f"barrier = {np.round(eq['barrier'] * 1e3, 3)} mJ, well stiffness = {np.round(eq['stiffness'], 1).tolist()} N/m")
+    results = []
+    for amp in args.amp:
+        t0 = time.time()
+        recs = gmr_jax.make_recordings(system, amp, snr_db=args.snr if args.snr > 0 else None, seed=args.seed)
+        t_sim = time.time() - t0
+        ratios = [(0.5 * np.ptp(r.x, axis=0) / L).tolist() for r in recs]
+        offset = None
+        if args.origin == "base":
+            offset = np.asarray(system.truth.cells.h_folded)
+            recs = shift_recordings(recs, offset)
+        print(f"\n=== amplitude {amp * 1e3:.3g} mm, SNR {args.snr} dB (simulation {t_sim:.1f} s)")
+        for r, q in zip(recs, ratios):
+            print(f"  amplitude ratio {r.name}: " + " ".join(f"{100 * v:.2f}%" for v in q))
+        entry = {"origin": args.origin, "amplitude": amp, "snr_db": args.snr, "amplitude_ratio": ratios}
+        methods = [("GMR", lambda: gmr_jax.reconstruct(recs, gmr_jax.Library(args.r, args.d)))]
+        if not args.no_gmc:
+            gr, gd = args.gmc_r or args.r, args.gmc_d or args.d
+            methods.append(("GMC-SINDy", lambda: gmr_jax.gmc_sindy(recs, gmr_jax.Library(gr, gd))))
+        for name, fn in methods:
+            t0 = time.time()
+            try:
+                rec = fn()
+            except Exception as e:  # report and go on
+                print(f"  {name}: failed: {e}")
+                entry[name] = {"error": str(e)}
+                continue
+            dt = time.time() - t0
+            ev = evaluate(system, rec.model, offset=offset)
+            extra = ""
+            if name == "GMR":
+                extra = " local orders r_i: " + str([d.stats.get("r_i") for d in rec.dofs])
+            print(f"  {name} ({dt:.1f} s){extra}")
+            for e in ev:
+                print(f"    cell {e['cell']}: F_r err {100 * e['restoring_rel_l2']:7.3f}%  F_d err "
+                      f"{100 * e['damping_rel_l2']:8.3f}%  equilibria match {e['equilibria_match']}"
+                      + (f" (saddle {100 * e['saddle_err_over_L']:+.2f}% L, barrier {100 * e['barrier_rel_err']:+.1f}%)"
+                         if e["equilibria_match"] else f" stable {np.round(np.array(e['stable']) * 1e3, 2)} mm"
+                         f" unstable {np.round(np.array(e['unstable']) * 1e3, 2)} mm"))
+            entry[name] = {"cells": ev, "seconds": dt, "model": rec.model.terms()}
+            if name == "GMR":
+                entry[name]["local_orders"] = [d.stats.get("r_i") for d in rec.dofs]
+                entry[name]["local_coef"] = [d.local_coef.tolist() for d in rec.dofs]
+        results.append(entry)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"system": system.name, "args": vars(args), "results": results}, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()

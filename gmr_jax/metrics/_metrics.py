@@ -1,0 +1,65 @@
+"""Accuracy metrics of a reconstructed model against a truth model (paper Sec. 2.3, Eq. 22)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..model._model import AbstractMechanicalModel
+
+
+def _grid_forces(model: AbstractMechanicalModel, dof: int, xs, vs, which: str):
+    d = model.n_dof
+
+    def one(x, v):
+        xx = jnp.zeros(d).at[dof].set(x)
+        vv = jnp.zeros(d).at[dof].set(v)
+        if which == "restoring":
+            return model.restoring(xx)[dof]
+        return model.damping(xx, vv)[dof]
+
+    return np.asarray(jax.vmap(jax.vmap(one, (None, 0)), (0, None))(jnp.asarray(xs), jnp.asarray(vs)))
+
+
+def restoring_error(model, truth, dof: int, x_range, n: int = 401) -> float:
+    """Relative L2 error of the restoring force of `dof` over `x_range`:
+    ||F_r - F_r,true|| / ||F_r,true|| on a uniform grid."""
+    xs = np.linspace(*x_range, n)
+    f = _grid_forces(model, dof, xs, np.zeros(1), "restoring")[:, 0]
+    g = _grid_forces(truth, dof, xs, np.zeros(1), "restoring")[:, 0]
+    return float(np.linalg.norm(f - g) / np.linalg.norm(g))
+
+
+def damping_error_map(model, truth, dof: int, x_range, v_range, n: int = 101):
+    """Eq. (22): e_d = log10|F_d - F_d,true| on an (x, v) grid; returns (xs, vs, e_d, F_d,true)."""
+    xs = np.linspace(*x_range, n)
+    vs = np.linspace(*v_range, n)
+    f = _grid_forces(model, dof, xs, vs, "damping")
+    g = _grid_forces(truth, dof, xs, vs, "damping")
+    return xs, vs, np.log10(np.abs(f - g) + 1e-300), g
+
+
+def damping_error(model, truth, dof: int, x_range, v_range, n: int = 101) -> float:
+    """Relative L2 error of the damping force over the (x, v) box."""
+    xs = np.linspace(*x_range, n)
+    vs = np.linspace(*v_range, n)
+    f = _grid_forces(model, dof, xs, vs, "damping")
+    g = _grid_forces(truth, dof, xs, vs, "damping")
+    return float(np.linalg.norm(f - g) / np.linalg.norm(g))
+
+
+def equilibria(model, dof: int, x_range, n: int = 4001):
+    """Zeros of the restoring force of `dof` in `x_range`, with stability (dF/dx > 0).
+
+    Returns a list of (x, stable) sorted by x."""
+    xs = np.linspace(*x_range, n)
+    f = _grid_forces(model, dof, xs, np.zeros(1), "restoring")[:, 0]
+    out = []
+    sf = np.sign(f)
+    for k in range(n - 1):
+        if sf[k] == 0:
+            slope = f[min(k + 1, n - 1)] - f[max(k - 1, 0)]
+            out.append((float(xs[k]), bool(slope > 0)))
+        elif sf[k] * sf[k + 1] < 0:
+            x0 = xs[k] - f[k] * (xs[k + 1] - xs[k]) / (f[k + 1] - f[k])
+            out.append((float(x0), bool(f[k + 1] > f[k])))
+    return out

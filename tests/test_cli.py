@@ -1,0 +1,72 @@
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import gmr_jax as g
+from gmr_jax.cli._main import main
+
+
+def run(args):
+    return subprocess.run([sys.executable, "-m", "gmr_jax.cli._main", *args], capture_output=True, text=True)
+
+
+@pytest.fixture(scope="module")
+def joint_files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("rec")
+    s = g.bistable_joint("position_independent")
+    recs = g.make_recordings(s, np.deg2rad(1.0), seed=1, duration=5.0)
+    paths = []
+    for r in recs:
+        p = d / f"{r.name}.csv"
+        # by hand: only t, x and the base input, as a user with a displacement sensor would have
+        np.savetxt(p, np.column_stack([r.t, r.x[:, 0], r.base_acc]), delimiter=",",
+                   header="t,x0,base_acc", comments="")
+        paths.append(str(p))
+    return paths
+
+
+def test_fit_hand_made_csv(joint_files, tmp_path, capsys):
+    out = tmp_path / "model.json"
+    assert main(["fit", *joint_files, "--out", str(out)]) == 0
+    m = g.load_model(out)
+    k = np.asarray(m.stiffness)[0]
+    np.testing.assert_allclose([k[1], k[3]], [-2244, 1755], rtol=0.03)
+    printed = capsys.readouterr().out
+    assert "estimated from x" in printed and "F_0(x, v)" in printed
+    assert json.loads(out.read_text())["format"] == "gmr-model/1"
+
+
+def test_fit_manual_threshold_and_baseline(joint_files, tmp_path):
+    assert main(["fit", *joint_files, "--out", str(tmp_path / "a.json"), "--threshold", "0.01"]) == 0
+    assert main(["fit", *joint_files, "--out", str(tmp_path / "b.json"), "--method", "gmc-sindy", "-r", "7", "-d", "7"]) == 0
+
+
+def _bad(tmp_path, name, **arrays):
+    p = tmp_path / name
+    np.savez(p, **arrays)
+    return str(p)
+
+
+def test_bad_inputs_one_line_exit_2(joint_files, tmp_path):
+    t = np.arange(1000) * 1e-3
+    x = np.sin(t)[:, None]
+    cases = {
+        "NaN": _bad(tmp_path, "nan.npz", t=t, x=np.where(t[:, None] > 0.5, np.nan, x)),
+        "not uniformly sampled": _bad(tmp_path, "nonuni.npz", t=t**1.2, x=x),
+        "only 10 samples": _bad(tmp_path, "short.npz", t=t[:10], x=x[:10]),
+        "shape": _bad(tmp_path, "shape.npz", t=t, x=x[:900]),
+    }
+    for msg, path in cases.items():
+        r = run(["fit", path, joint_files[0], "--out", str(tmp_path / "m.json")])
+        assert r.returncode == 2, r.stderr
+        assert msg in r.stderr and "Traceback" not in r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1
+    r = run(["fit", joint_files[0], "--out", str(tmp_path / "m.json")])
+    assert r.returncode == 2 and "at least two distinct equilibria" in r.stderr and "Traceback" not in r.stderr
+    r = run(["fit", joint_files[0], joint_files[0], "--out", str(tmp_path / "m.json")])
+    assert r.returncode == 2 and "same equilibrium" in r.stderr
+    r = run(["fit", str(tmp_path / "missing.csv"), "--out", str(tmp_path / "m.json")])
+    assert r.returncode == 2 and "no such file" in r.stderr
