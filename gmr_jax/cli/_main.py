@@ -71,6 +71,54 @@ def _cmd_fit(args):
     return 0
 
 
+def _grid(spec, name):
+    try:
+        a, b, n = spec.split(":")
+        a, b, n = float(a), float(b), int(n)
+    except ValueError:
+        raise GMRInputError(f"--{name} must be START:STOP:NUM, e.g. 0.1:5:50, got {spec!r}") from None
+    if n < 1 or not (np.isfinite(a) and np.isfinite(b)) or (name == "f" and min(a, b) <= 0):
+        raise GMRInputError(f"--{name} {spec!r}: need NUM >= 1, finite bounds (and f > 0)")
+    return np.linspace(a, b, n)
+
+
+def _cmd_basins(args):
+    from ..basins._sweep import SweepSettings, basin_map
+    from ..basins._wells import stable_wells
+    from ..model._io import load_model
+    from ..plots._basins import basin_figure, config_label
+
+    model = load_model(args.model)
+    f, A = _grid(args.f, "f"), _grid(args.A, "A")
+    lo, hi = (float(v) for v in args.x_range.split(":")) if args.x_range else (None, None)
+    if lo is None:
+        raise GMRInputError("--x-range LO:HI is needed: the deformation interval in which to look for wells")
+    wells = stable_wells(model, [[lo, hi]] * model.n_dof)
+    if np.any(np.isnan(wells[:, 0])):
+        raise GMRInputError(f"no stable equilibrium found in [{lo}, {hi}] for some DOF: widen --x-range")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    settings = SweepSettings(settle_time=args.settle_time)
+    n = f.size * A.size
+    print(f"gmr basins: {n} points ({A.size} amplitudes x {f.size} frequencies), wells per DOF: "
+          f"{[np.round(w[~np.isnan(w)], 6).tolist() for w in wells]}")
+    rows = []
+    for k in range(A.size):  # one amplitude row per call: progress without recompiling
+        rows.append(basin_map(model, f, A[k:k + 1], wells, settings=settings, chunk=args.chunk))
+        done = int(40 * (k + 1) / A.size)
+        print(f"\r  [{'#' * done}{'.' * (40 - done)}] {k + 1}/{A.size}", end="", flush=True)
+    print()
+    cat = {key: np.concatenate([np.asarray(getattr(r, key)) for r in rows]) for key in
+           ("wells", "config", "result", "x_final", "v_final")}
+    np.savez(out / "basins.npz", f=f, A=A, **cat)
+    basin_figure(f, A, cat["config"], model.n_dof, out / "basins.png")
+    vals, counts = np.unique(cat["config"], return_counts=True)
+    for v, c in zip(vals, counts):
+        print(f"  {config_label(int(v), model.n_dof):22s} {c:7d} points")
+    print(f"wrote {out}/basins.npz and basins.png")
+    return 0
+
+
 def build_parser():
     p = argparse.ArgumentParser(prog="gmr", description="Global model reconstruction of multi-stable structures")
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -90,6 +138,15 @@ def build_parser():
     f.add_argument("--no-velocity-damping", action="store_true")
     f.add_argument("--no-position-damping", action="store_true")
     f.set_defaults(fn=_cmd_fit)
+    b = sub.add_parser("basins", help="deployment basins over an (f, A) grid of the Eq. (25) tip half-sine")
+    b.add_argument("model", help="gmr-model/1 JSON")
+    b.add_argument("--f", required=True, help="frequencies START:STOP:NUM (Hz)")
+    b.add_argument("--A", required=True, help="amplitudes START:STOP:NUM (force units)")
+    b.add_argument("--x-range", default=None, help="LO:HI deformation interval to search for wells")
+    b.add_argument("--settle-time", type=float, default=10.0, help="free time after the load (s)")
+    b.add_argument("--chunk", type=_positive_int, default=512, help="trajectories per lockstep batch")
+    b.add_argument("--out", required=True)
+    b.set_defaults(fn=_cmd_basins)
     return p
 
 

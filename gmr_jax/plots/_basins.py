@@ -1,0 +1,36 @@
+"""Basin picture: final configuration over the (f, A) grid, coloured by configuration."""
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.colors import BoundaryNorm, ListedColormap  # noqa: E402
+
+
+def config_label(config: int, n_dof: int) -> str:
+    """0-1-1-0-0 style name (cell 0 first) of a configuration bit field."""
+    if config < 0:
+        return "not settled / failed"
+    return "-".join(str((config >> i) & 1) for i in range(n_dof))
+
+
+def basin_figure(f, A, config, n_dof: int, path, title: str = ""):
+    config = np.asarray(config)
+    values = sorted(set(config.ravel().tolist()))
+    index = {v: k for k, v in enumerate(values)}
+    img = np.vectorize(index.get)(config)
+    base = plt.get_cmap("tab20")
+    colors = [(0.15, 0.15, 0.15, 1.0) if v < 0 else base(k % 20) for k, v in enumerate(values)]
+    cmap = ListedColormap(colors)
+    norm = BoundaryNorm(np.arange(len(values) + 1) - 0.5, len(values))
+    fig, ax = plt.subplots(figsize=(7.5, 5), constrained_layout=True)
+    ax.pcolormesh(np.asarray(f), np.asarray(A), img, cmap=cmap, norm=norm, shading="auto")
+    handles = [plt.Rectangle((0, 0), 1, 1, color=colors[k]) for k in range(len(values))]
+    ax.legend(handles, [config_label(v, n_dof) for v in values], title="final configuration",
+              bbox_to_anchor=(1.02, 1), loc="upper left", fontsize=8)
+    ax.set_xlabel("actuation frequency f [Hz]")
+    ax.set_ylabel("actuation amplitude A")
+    ax.set_title(title or "deployment basins (tip half-sine, Eq. 25)")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
