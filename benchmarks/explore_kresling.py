@@ -57,6 +57,35 @@ def shift_recordings(recs, offset):
     return [replace(r, x=r.x + offset[None, :]) for r in recs]
 
 
+def screened(rec, z: float):
+    """GMR with a significance screen (a proposed change, done here outside the library): after
+    the local fits, a coefficient with |c| < z * stderr is set to zero (a known zero; a dropped
+    top order lowers r_i), then the coordination is redone. Only the model is rebuilt."""
+    from gmr_jax.coordination._coordinate import coordinate
+    from gmr_jax.local._local_fit import LocalFit
+    from gmr_jax.model._model import GlobalModel
+
+    lib, m = rec.library, rec.model
+    stiff, vdamp, pdamp, orders = [], [], [], []
+    for dof in rec.dofs:
+        coef = np.where(np.abs(dof.local_coef) < z * dof.local_stderr, 0.0, dof.local_coef)
+        n, p = coef.shape
+        fits = LocalFit(equilibrium=jnp.asarray(dof.equilibria), coef=jnp.asarray(coef),
+                        covariance=jnp.asarray(np.stack([np.diag(se**2) for se in dof.local_stderr])),
+                        threshold=jnp.asarray(dof.thresholds), rss=jnp.zeros(n), n_samples=jnp.ones(n))
+        g = coordinate(fits, lib).value
+        stiff.append(np.asarray(g.stiffness)), vdamp.append(np.asarray(g.velocity_damping))
+        pdamp.append(np.asarray(g.position_damping))
+        orders.append(np.asarray(gmr_jax.coordination._hermite.highest_order(
+            jnp.asarray(coef[:, lib.indices("stiffness")] != 0))).tolist())
+    size = max(a.shape[0] for a in stiff)
+    pad = lambda arrs: jnp.asarray(np.stack([np.pad(a, (0, size - a.shape[0])) for a in arrs]))  # noqa: E731
+    sized = lambda arrs: jnp.asarray(np.stack([np.pad(a, (0, max(x.shape[0] for x in arrs) - a.shape[0])) for a in arrs]))  # noqa: E731
+    model = GlobalModel(masses=m.masses, stiffness=pad(stiff), velocity_damping=sized(vdamp),
+                        position_damping=sized(pdamp), topology=m.topology)
+    return model, orders
+
+
 def evaluate(system, rec_model, n_grid=801, n_v=41, offset=None):
     truth = system.truth
     d = truth.n_dof
@@ -99,6 +128,63 @@ def evaluate(system, rec_model, n_grid=801, n_v=41, offset=None):
     return out
 
 
+def _line(e):
+    if e["equilibria_match"]:
+        eq = f"(saddle {100 * e['saddle_err_over_L']:+.2f}% L, barrier {100 * e['barrier_rel_err']:+.1f}%)"
+    else:
+        eq = (f"stable {np.round(np.array(e['stable']) * 1e3, 2)} mm "
+              f"unstable {np.round(np.array(e['unstable']) * 1e3, 2)} mm")
+    return (f"    cell {e['cell']}: F_r err {100 * e['restoring_rel_l2']:7.3f}%  F_d err "
+            f"{100 * e['damping_rel_l2']:9.3f}%  equilibria match {e['equilibria_match']} {eq}")
+
+
+def run_one(system, amp, seed, args, L):
+    t0 = time.time()
+    recs = gmr_jax.make_recordings(system, amp, snr_db=args.snr if args.snr > 0 else None, seed=seed)
+    t_sim = time.time() - t0
+    ratios = [(0.5 * np.ptp(r.x, axis=0) / L).tolist() for r in recs]
+    offset = None
+    if args.origin == "base":
+        offset = np.asarray(system.truth.cells.h_folded)
+        recs = shift_recordings(recs, offset)
+    print(f"\n=== amplitude {amp * 1e3:.3g} mm, SNR {args.snr} dB, seed {seed}, origin {args.origin} "
+          f"(simulation {t_sim:.1f} s)")
+    for r, q in zip(recs, ratios):
+        print(f"  amplitude ratio {r.name}: " + " ".join(f"{100 * v:.2f}%" for v in q))
+    entry = {"origin": args.origin, "amplitude": amp, "seed": seed, "snr_db": args.snr,
+             "amplitude_ratio": ratios}
+    methods = [("GMR", lambda: gmr_jax.reconstruct(recs, gmr_jax.Library(args.r, args.d)))]
+    if not args.no_gmc:
+        gr, gd = args.gmc_r or args.r, args.gmc_d or args.d
+        methods.append((f"GMC-SINDy({gr},{gd})", lambda: gmr_jax.gmc_sindy(recs, gmr_jax.Library(gr, gd))))
+    for name, fn in methods:
+        t0 = time.time()
+        try:
+            rec = fn()
+        except Exception as e:  # report and go on
+            print(f"  {name}: failed: {e}")
+            entry[name] = {"error": str(e)}
+            continue
+        dt = time.time() - t0
+        variants = [(name, rec.model, None)]
+        if name == "GMR":
+            variants[0] = (name, rec.model, [d.stats.get("r_i") for d in rec.dofs])
+            if args.screen > 0:
+                model, orders = screened(rec, args.screen)
+                variants.append((f"GMR+screen{args.screen:g}", model, orders))
+        for vname, model, orders in variants:
+            ev = evaluate(system, model, offset=offset)
+            worst = max(e["restoring_rel_l2"] for e in ev)
+            extra = f" local orders r_i: {orders}" if orders is not None else ""
+            print(f"  {vname} ({dt:.1f} s) worst F_r err {100 * worst:.2f}%, all equilibria match "
+                  f"{all(e['equilibria_match'] for e in ev)}{extra}")
+            if not args.quiet:
+                for e in ev:
+                    print(_line(e))
+            entry[vname] = {"cells": ev, "seconds": dt, "model": model.terms(), "local_orders": orders}
+    return entry
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--system", default="kresling5")
@@ -115,6 +201,10 @@ def main():
                     help="coordinate origin given to the fits: the folded state (x = h - h_f, the "
                          "system's own) or the cell's base plate (x = h, absolute height)")
     ap.add_argument("--json", default=None)
+    ap.add_argument("--screen", type=float, default=0.0,
+                    help="also report GMR with local coefficients |c| < SCREEN * stderr zeroed")
+    ap.add_argument("--seeds", type=int, nargs="+", default=None, help="several noise seeds")
+    ap.add_argument("--quiet", action="store_true", help="one summary line per method")
     args = ap.parse_args()
     system = {"kresling5": kresling5, "kresling3": kresling3}[args.system](twist=args.twist)
     L = np.asarray(system.truth.interwell)
@@ -122,48 +212,10 @@ def main():
     print(f"{system.name}: L = {np.round(L * 1e3, 2)} mm, saddle = {np.round(eq['unstable'] * 1e3, 2)} mm, "
           f"barrier = {np.round(eq['barrier'] * 1e3, 3)} mJ, well stiffness = {np.round(eq['stiffness'], 1).tolist()} N/m")
     results = []
+    seeds = args.seeds or [args.seed]
     for amp in args.amp:
-        t0 = time.time()
-        recs = gmr_jax.make_recordings(system, amp, snr_db=args.snr if args.snr > 0 else None, seed=args.seed)
-        t_sim = time.time() - t0
-        ratios = [(0.5 * np.ptp(r.x, axis=0) / L).tolist() for r in recs]
-        offset = None
-        if args.origin == "base":
-            offset = np.asarray(system.truth.cells.h_folded)
-            recs = shift_recordings(recs, offset)
-        print(f"\n=== amplitude {amp * 1e3:.3g} mm, SNR {args.snr} dB (simulation {t_sim:.1f} s)")
-        for r, q in zip(recs, ratios):
-            print(f"  amplitude ratio {r.name}: " + " ".join(f"{100 * v:.2f}%" for v in q))
-        entry = {"origin": args.origin, "amplitude": amp, "snr_db": args.snr, "amplitude_ratio": ratios}
-        methods = [("GMR", lambda: gmr_jax.reconstruct(recs, gmr_jax.Library(args.r, args.d)))]
-        if not args.no_gmc:
-            gr, gd = args.gmc_r or args.r, args.gmc_d or args.d
-            methods.append(("GMC-SINDy", lambda: gmr_jax.gmc_sindy(recs, gmr_jax.Library(gr, gd))))
-        for name, fn in methods:
-            t0 = time.time()
-            try:
-                rec = fn()
-            except Exception as e:  # report and go on
-                print(f"  {name}: failed: {e}")
-                entry[name] = {"error": str(e)}
-                continue
-            dt = time.time() - t0
-            ev = evaluate(system, rec.model, offset=offset)
-            extra = ""
-            if name == "GMR":
-                extra = " local orders r_i: " + str([d.stats.get("r_i") for d in rec.dofs])
-            print(f"  {name} ({dt:.1f} s){extra}")
-            for e in ev:
-                print(f"    cell {e['cell']}: F_r err {100 * e['restoring_rel_l2']:7.3f}%  F_d err "
-                      f"{100 * e['damping_rel_l2']:8.3f}%  equilibria match {e['equilibria_match']}"
-                      + (f" (saddle {100 * e['saddle_err_over_L']:+.2f}% L, barrier {100 * e['barrier_rel_err']:+.1f}%)"
-                         if e["equilibria_match"] else f" stable {np.round(np.array(e['stable']) * 1e3, 2)} mm"
-                         f" unstable {np.round(np.array(e['unstable']) * 1e3, 2)} mm"))
-            entry[name] = {"cells": ev, "seconds": dt, "model": rec.model.terms()}
-            if name == "GMR":
-                entry[name]["local_orders"] = [d.stats.get("r_i") for d in rec.dofs]
-                entry[name]["local_coef"] = [d.local_coef.tolist() for d in rec.dofs]
-        results.append(entry)
+        for seed in seeds:
+            results.append(run_one(system, amp, seed, args, L))
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"system": system.name, "args": vars(args), "results": results}, f, indent=1)

@@ -1,5 +1,7 @@
 """The Kresling chain benchmark: bistable truss cells, their chain, and its data."""
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -21,6 +23,12 @@ def _cell(chain: KreslingChain, i: int) -> KreslingCell:
     return jax.tree_util.tree_map(lambda a: a[i], chain.cells)
 
 
+@eqx.filter_jit
+def _profile(cell: KreslingCell, xs):
+    """Energy, force and stiffness of one cell along xs, in one compiled call."""
+    return jax.vmap(cell.energy)(xs), jax.vmap(cell.force)(xs), jax.vmap(cell.stiffness)(xs)
+
+
 @pytest.fixture(scope="module", params=["linear", "torque_free"])
 def chain(request):
     return kresling_chain([20.0, 32.0, 60.0], [0.04, 0.04, 0.04], twist=request.param)
@@ -31,71 +39,95 @@ def test_cells_are_bistable_with_documented_equilibria(chain):
     L = np.asarray(chain.interwell)
     np.testing.assert_allclose(L, 0.03)
     np.testing.assert_allclose(eq["stable"], np.stack([np.zeros(3), L], axis=1))
-    for i in range(3):
-        cell = _cell(chain, i)
-        xf, xd = eq["stable"][i]
-        # both stable states are stress free: zero force, zero energy, positive stiffness
-        for x in (xf, xd):
-            assert abs(float(cell.force(x))) < 1e-12
-            assert abs(float(cell.energy(x))) < 1e-15
-        assert np.all(eq["stiffness"][i] > 0)
-        # exactly one saddle between them, with negative stiffness and a positive barrier
-        xu = eq["unstable"][i]
-        assert xf < xu < xd
-        assert abs(float(cell.force(xu))) < 1e-10 * float(eq["stiffness"][i, 0]) * L[i]
-        assert float(cell.stiffness(xu)) < 0
-        assert eq["barrier"][i] > 0
-        np.testing.assert_allclose(eq["barrier"][i], float(cell.energy(xu)), rtol=1e-12)
-        xs = jnp.linspace(-0.3 * L[i], 1.3 * L[i], 1999)  # no grid point on a root
-        f = np.asarray(jax.vmap(cell.force)(xs))
-        assert np.count_nonzero(np.sign(f[1:]) != np.sign(f[:-1])) == 3
+    assert np.all(eq["stiffness"] > 0)
+    assert np.all(eq["barrier"] > 0)
+    assert np.all((eq["unstable"] > 0) & (eq["unstable"] < L))
     # graded: the folded-state stiffness is what was asked for
     np.testing.assert_allclose(eq["stiffness"][:, 0], [20.0, 32.0, 60.0], rtol=1e-10)
+    for i in range(3):
+        xu = eq["unstable"][i]
+        pts = jnp.array([0.0, L[i], xu])
+        u, f, k = (np.asarray(a) for a in _profile(_cell(chain, i), pts))
+        # both stable states are stress free: zero energy and force; the saddle has k < 0
+        np.testing.assert_allclose(u[:2], 0.0, atol=1e-15)
+        np.testing.assert_allclose(f, 0.0, atol=1e-10 * eq["stiffness"][i, 0] * L[i])
+        np.testing.assert_allclose(k[:2], eq["stiffness"][i], rtol=1e-12)
+        assert k[2] < 0
+        np.testing.assert_allclose(eq["barrier"][i], u[2], rtol=1e-12)
+        # exactly three equilibria over a wide range (no grid point on a root)
+        xs = jnp.linspace(-0.3 * L[i], 1.3 * L[i], 1999)
+        _, f, _ = _profile(_cell(chain, i), xs)
+        f = np.asarray(f)
+        assert np.count_nonzero(np.sign(f[1:]) != np.sign(f[:-1])) == 3
 
 
 def test_restoring_force_is_the_energy_gradient(chain):
     cell = _cell(chain, 1)
     L = float(cell.interwell)
-    h = 1e-7
-    for x in np.linspace(-0.2 * L, 1.2 * L, 9):
-        fd = (float(cell.energy(x + h)) - float(cell.energy(x - h))) / (2 * h)
-        np.testing.assert_allclose(float(cell.force(x)), fd, rtol=1e-6, atol=1e-9)
+    h = 1e-7 * L
+    xs = jnp.linspace(-0.2 * L, 1.2 * L, 9)
+    u_plus, f, k = _profile(cell, xs + h)
+    u_minus, f_minus, _ = _profile(cell, xs - h)
+    _, f0, k0 = _profile(cell, xs)
+    fd = (u_plus - u_minus) / (2 * h)
+    scale = float(jnp.max(jnp.abs(f0)))
+    np.testing.assert_allclose(np.asarray(f0), np.asarray(fd), atol=1e-6 * scale)
+    kd = (f - f_minus) / (2 * h)
+    np.testing.assert_allclose(np.asarray(k0), np.asarray(kd), atol=1e-6 * float(jnp.max(jnp.abs(k0))))
 
 
 def test_torque_free_twist_is_torque_free():
     cell = _cell(kresling_chain([20.0], [0.04], twist="torque_free"), 0)
+    lin = dataclasses.replace(cell, twist="linear")
     L = float(cell.interwell)
-    dU = jax.grad(cell.truss_energy, argnums=1)
-    for x in np.linspace(-0.2 * L, 1.2 * L, 7):
-        phi = cell.twist_angle(x)
-        assert abs(float(dU(cell.h_folded + x, phi))) < 1e-12
-    # and is not the linear guide (that one needs a torque away from the wells)
-    lin = eqx.tree_at(lambda c: c.twist, cell, "linear")
-    assert abs(float(lin.twist_angle(0.5 * L) - cell.twist_angle(0.5 * L))) > 1e-3
+    xs = jnp.linspace(-0.2 * L, 1.2 * L, 7)
+
+    @eqx.filter_jit
+    def torque(c, xs):
+        phi = jax.vmap(c.twist_angle)(xs)
+        return jax.vmap(jax.grad(c.truss_energy, argnums=1))(c.h_folded + xs, phi), phi
+
+    tq, phi = torque(cell, xs)
+    np.testing.assert_allclose(np.asarray(tq), 0.0, atol=1e-12)
+    # unlike the linear guide, which needs a torque away from the wells
+    tq_lin, phi_lin = torque(lin, xs)
+    assert float(jnp.max(jnp.abs(tq_lin))) > 1e-3
+    # both relations pass through the two stress-free states
+    _, phi_wells = torque(cell, jnp.array([0.0, L]))
+    _, lin_wells = torque(lin, jnp.array([0.0, L]))
+    np.testing.assert_allclose(np.asarray(phi_wells), np.asarray(lin_wells), atol=1e-10)
 
 
 def test_jit_vmap_grad(chain):
     x = jnp.array([0.001, 0.015, 0.029])
     v = jnp.array([0.01, -0.02, 0.03])
-    f = eqx.filter_jit(lambda m, x, v: m.force(x, v))(chain, x, v)
-    np.testing.assert_allclose(np.asarray(f), np.asarray(chain.force(x, v)), rtol=1e-12)
-    # vmap over states
-    xs = jnp.stack([x, 2 * x, 0.5 * x])
-    fs = jax.vmap(chain.restoring)(xs)
-    np.testing.assert_allclose(np.asarray(fs[1]), np.asarray(chain.restoring(2 * x)), rtol=1e-12)
-    # grad with respect to the state: the tangent stiffness matrix is diagonal
-    jac = jax.jacfwd(chain.restoring)(x)
+
+    @eqx.filter_jit
+    def all_at_once(m, x, v):
+        f = m.force(x, v)
+        fs = jax.vmap(m.restoring)(jnp.stack([x, 2 * x, 0.5 * x]))
+        jac = jax.jacfwd(m.restoring)(x)
+        g = eqx.filter_grad(lambda m: jnp.sum(m.restoring(x) ** 2))(m)
+        return f, fs, jac, g
+
+    f, fs, jac, g = all_at_once(chain, x, v)
+    # jit agrees with the direct evaluation of the cells
+    cells_f = [float(_profile(_cell(chain, i), x[i : i + 1])[1][0]) for i in range(3)]
+    damp = np.asarray(chain.damping(x, v))
+    np.testing.assert_allclose(np.asarray(f), np.array(cells_f) + damp, rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(fs[1]), np.asarray(all_at_once(chain, 2 * x, v)[0] - chain.damping(2 * x, v)), rtol=1e-10)
+    # grad in the state: the tangent stiffness matrix is diagonal and matches the cells
     np.testing.assert_allclose(np.asarray(jac - jnp.diag(jnp.diag(jac))), 0.0, atol=1e-12)
-    cell = _cell(chain, 2)
-    h = 1e-7
-    fd = (float(cell.force(x[2] + h)) - float(cell.force(x[2] - h))) / (2 * h)
-    np.testing.assert_allclose(float(jac[2, 2]), fd, rtol=1e-5)
-    # grad with respect to parameters (e.g. for design or model updating)
+    for i in range(3):
+        k = float(_profile(_cell(chain, i), x[i : i + 1])[2][0])
+        np.testing.assert_allclose(float(jac[i, i]), k, rtol=1e-10)
+    # grad in the parameters (design, model updating) against a finite difference
+    eps = 1e-6
+
+    @eqx.filter_jit
     def total(m):
         return jnp.sum(m.restoring(x) ** 2)
 
-    g = eqx.filter_grad(total)(chain)
-    eps = 1e-6
     bumped = eqx.tree_at(lambda m: m.cells.k_b, chain, chain.cells.k_b * jnp.array([1.0, 1.0, 1.0 + eps]))
     fd = (float(total(bumped)) - float(total(chain))) / (eps * float(chain.cells.k_b[2]))
     np.testing.assert_allclose(float(g.cells.k_b[2]), fd, rtol=1e-4)
@@ -104,11 +136,17 @@ def test_jit_vmap_grad(chain):
 def test_accelerations_follow_the_chain_equation(chain):
     x = jnp.array([0.001, 0.015, 0.029])
     v = jnp.array([0.01, -0.02, 0.03])
-    xdd = chain.accelerations(x, v, jnp.asarray(0.3), jnp.zeros(3))
-    a = chain.absolute_accelerations(xdd, jnp.asarray(0.3))
+    b = jnp.asarray(0.3)
+
+    @eqx.filter_jit
+    def go(m):
+        xdd = m.accelerations(x, v, b, jnp.zeros(3))
+        return m.absolute_accelerations(xdd, b), m.force(x, v)
+
+    a, f = go(chain)
     m = np.asarray(chain.masses)
     ha = np.cumsum((m * np.asarray(a))[::-1])[::-1]
-    np.testing.assert_allclose(ha + np.asarray(chain.force(x, v)), 0.0, atol=1e-12)
+    np.testing.assert_allclose(ha + np.asarray(f), 0.0, atol=1e-12)
 
 
 def test_systems():
@@ -121,9 +159,8 @@ def test_systems():
         assert np.all(s.x_range[:, 0] < 0) and np.all(s.x_range[:, 1] > s.equilibria[1])
         assert s.orders == {"gmr": (5, 5), "gmc": (5, 5)}
         assert s.truth.topology == "chain" and s.truth.n_dof == d
-        # the equilibria are equilibria of the chain
-        for e in s.equilibria:
-            np.testing.assert_allclose(np.asarray(s.truth.restoring(jnp.asarray(e))), 0.0, atol=1e-12)
+        f = eqx.filter_jit(lambda m, e: jax.vmap(m.restoring)(e))(s.truth, jnp.asarray(s.equilibria))
+        np.testing.assert_allclose(np.asarray(f), 0.0, atol=1e-12)
     # cells stiffen from the base: the base cell is the softest
     k = cell_equilibria(kresling5().truth)["stiffness"][:, 0]
     assert np.all(np.diff(k) > 0)

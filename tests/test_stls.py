@@ -28,7 +28,8 @@ def _single_threaded_blas():
 
 def _solver(threshold, alpha, normalize=True, unbias=True, max_iter=20):
     # thresholds/ridge as arrays: filter_jit treats Python floats as static (one compile each)
-    return g.STLS(jnp.asarray(threshold, float), jnp.asarray(alpha, float), max_iter, normalize, unbias)
+    return g.STLS(jnp.asarray(threshold, float), jnp.asarray(alpha, float), max_iter, normalize,
+                  unbias)
 
 
 def _pysindy(x, y, threshold, alpha, normalize, unbias=True, max_iter=20, sample_weight=None):
@@ -89,7 +90,8 @@ def test_matches_pysindy_random(normalize, alpha):
         theta, y, _ = _sparse_problem(seed, noise=[0.0, 0.05, 0.5][seed % 3])
         for th in thresholds:
             ref = _pysindy(theta, y, th, alpha, normalize)
-            sol = g.stls(jnp.asarray(theta), jnp.asarray(y), _solver(th, alpha, normalize), throw=False)
+            solver = _solver(th, alpha, normalize)
+            sol = g.stls(jnp.asarray(theta), jnp.asarray(y), solver, throw=False)
             assert sol.result == g.RESULTS.successful
             _assert_same(sol.value, ref, sol.stats["support"])
             supports.add(tuple(ref != 0))
@@ -162,7 +164,8 @@ def test_jit_no_retrace_over_thresholds():
 def test_vmap_over_thresholds():
     theta, y, _ = _sparse_problem(5, noise=0.2)
     ths = jnp.geomspace(1e-2, 30.0, 12)
-    fit = jax.vmap(lambda th: g.stls(jnp.asarray(theta), jnp.asarray(y), _solver(th, 0.05), throw=False))
+    theta_j, y_j = jnp.asarray(theta), jnp.asarray(y)
+    fit = jax.vmap(lambda th: g.stls(theta_j, y_j, _solver(th, 0.05), throw=False))
     sols = fit(ths)
     assert sols.value.shape == (12, P)
     n_act = np.asarray(sols.stats["support"]).sum(axis=1)
@@ -181,7 +184,8 @@ def test_vmap_over_datasets():
     for k, (theta, y, xi) in enumerate(probs):
         _assert_same(sols.value[k], _pysindy(theta, y, 0.5, 0.05, True), sols.stats["support"][k])
         one = g.stls(thetas[k], ys[k], solver)
-        np.testing.assert_allclose(np.asarray(sols.aux[k]), np.asarray(one.aux), rtol=1e-10, atol=1e-300)
+        np.testing.assert_allclose(np.asarray(sols.aux[k]), np.asarray(one.aux), rtol=1e-10,
+                                   atol=1e-300)
 
 
 @pytest.mark.parametrize("unbias", [True, False])
@@ -237,8 +241,9 @@ def test_max_iterations_reached():
     with pytest.raises(Exception, match="did not converge"):
         g.stls(jnp.asarray(theta), jnp.asarray(y), short, throw=True)
     # under vmap: per-threshold codes (a tiny threshold keeps everything at iteration 1)
-    sols = jax.vmap(lambda t: g.stls(jnp.asarray(theta), jnp.asarray(y), _solver(t, 0.05, max_iter=1),
-                                      throw=False))(jnp.asarray([1e-8, th]))
+    theta_j, y_j = jnp.asarray(theta), jnp.asarray(y)
+    sols = jax.vmap(lambda t: g.stls(theta_j, y_j, _solver(t, 0.05, max_iter=1), throw=False))(
+        jnp.asarray([1e-8, th]))
     assert np.asarray(sols.result._value).tolist() == [
         g.RESULTS.successful._value, g.RESULTS.max_iterations_reached._value]
 
@@ -247,14 +252,17 @@ def test_nonfinite_input():
     theta, y, _ = _sparse_problem(7)
     theta, y = jnp.asarray(theta), jnp.asarray(y)
     solver = _solver(0.3, 0.05)
-    for t, yy in ((theta, y.at[5].set(jnp.nan)), (theta.at[3, 2].set(jnp.nan), y), (theta, y.at[0].set(jnp.inf))):
+    bad = [(theta, y.at[5].set(jnp.nan)), (theta.at[3, 2].set(jnp.nan), y),
+           (theta, y.at[0].set(jnp.inf))]
+    for t, yy in bad:
         sol = g.stls(t, yy, solver, throw=False)
         assert sol.result == g.RESULTS.nonfinite
         assert np.all(np.isnan(np.asarray(sol.value)))
     with pytest.raises(Exception, match="Non-finite"):
         g.stls(theta, y.at[5].set(jnp.nan), solver)
     grid = jnp.geomspace(1e-3, 10.0, 5)
-    assert g.select_threshold(theta, y.at[5].set(jnp.nan), grid, solver).result == g.RESULTS.nonfinite
+    sel = g.select_threshold(theta, y.at[5].set(jnp.nan), grid, solver)
+    assert sel.result == g.RESULTS.nonfinite
 
 
 def test_all_eliminated_is_zero_and_successful():

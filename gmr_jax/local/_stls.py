@@ -31,8 +31,8 @@ class STLS(eqx.Module):
     - `unbias`: refit without ridge on the final support.
     """
 
-    threshold: Float[Array, ""] | float = 0.1
-    alpha: Float[Array, ""] | float = 0.05
+    threshold: Float[Array, ""] = eqx.field(converter=lambda x: jnp.asarray(x, float), default=0.1)
+    alpha: Float[Array, ""] = eqx.field(converter=lambda x: jnp.asarray(x, float), default=0.05)
     max_iter: int = eqx.field(static=True, default=20)
     normalize_columns: bool = eqx.field(static=True, default=True)
     unbias: bool = eqx.field(static=True, default=True)

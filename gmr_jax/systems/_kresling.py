@@ -21,13 +21,18 @@ deployed state x = L = h_d - h_f (the interwell distance).
   phi(x) = phi_f + (phi_d - phi_f) x / L, as if the top plate were guided by a helical track.
   The energy along this path is the exact truss energy; F is its total derivative (the guide
   supplies the torque). It is smooth for every h, has exactly the two stress-free wells, wells of
-  similar stiffness (as in the paper's Table B5), and is well approximated by a quintic over the
-  folding range (best quintic fit ~0.3 %, best cubic ~5 %), so an order-5 global model can reach
-  the per-cell accuracy the benchmark asks for, but only if the local fits see curvature.
+  similar stiffness (deployed/folded 1.17, as in the paper's Table B5), and is close to, but not,
+  a polynomial over the folding range [-0.1 L, 1.1 L] (best least-squares cubic 5.7 %, quintic
+  0.15 %, degree 7 0.004 % relative L2 error), so an order-5 global model can reach a few
+  per mille, but only if the local fits resolve the curvature (F'') at both wells: a cubic
+  Hermite model from the local stiffnesses alone is off by ~20 %.
 - `"torque_free"`: the top plate turns freely, phi(h) = argmin_phi U(h, phi) (dU/dphi = 0),
-  found by a fixed number of safeguarded Newton steps from the linear twist (jittable and
-  differentiable by unrolling). A harder truth: the folded well is an order of magnitude softer
-  than the deployed one and the curve needs a degree-7+ polynomial.
+  found by a fixed number of safeguarded Newton steps from the linear twist (jittable); its
+  derivatives come from the implicit function theorem (a custom JVP), not from unrolling, so
+  forces, stiffnesses and parameter gradients are exact and cheap to compile. A harder truth
+  (closer to the paper's prototype, Table B7): the deployed well is ~8x stiffer than the
+  folded one, and the curve needs a degree-7 polynomial (best quintic ~3.5 %, best
+  degree-7 fit ~0.1 % over the folding range).
 
 **Damping.** F_d = [c0 + c2 ((x - L/2)/(L/2))²] v: viscous c0 at the saddle region rising to
 c0 + c2 at both wells (position-dependent, a polynomial of x: exactly representable by the
@@ -121,21 +126,9 @@ class KreslingCell(eqx.Module):
     def twist_angle(self, x):
         """Twist phi (rad) at deformation x, by the chosen `twist` relation."""
         phi_f, phi_d = self.stress_free_twists()
-        phi = phi_f + (phi_d - phi_f) * x / self.interwell
         if self.twist == "linear":
-            return phi
-        h = self.h_folded + x
-        dU = jax.grad(self.truss_energy, argnums=1)
-        d2U = jax.grad(dU, argnums=1)
-        max_step = 0.25 * (phi_f - phi_d)
-
-        def newton(_, p):
-            g, k = dU(h, p), d2U(h, p)
-            # Newton where the energy is convex in phi, else a descent step; clipped.
-            step = jnp.where(k > 0, -g / jnp.where(k > 0, k, 1.0), -jnp.sign(g) * max_step)
-            return p + jnp.clip(step, -max_step, max_step)
-
-        return jax.lax.fori_loop(0, self.newton_steps, newton, phi)
+            return phi_f + (phi_d - phi_f) * x / self.interwell
+        return _torque_free_twist(self, jnp.asarray(self.h_folded + x, float))
 
     def height(self, x):
         return self.h_folded + x
@@ -162,23 +155,28 @@ class KreslingCell(eqx.Module):
         s = (x - 0.5 * self.interwell) / (0.5 * self.interwell)
         return (self.c0 + self.c2 * s**2) * v
 
-    def equilibria(self, n_grid: int = 257, newton_steps: int = 20):
+    def equilibria(self, n_grid: int = 257, bisections: int = 60):
         """Equilibria and energy barrier (jittable; vmap it for several cells).
 
         **Returns:** a dict with `stable` (2,) = (0, L) (folded, deployed), `unstable` the saddle
-        between them (the maximum of U, refined by Newton on F), `barrier` U(saddle) - U(folded)
-        (J; both wells are at zero energy, so this is also the barrier seen from the deployed
-        state) and `stiffness` (2,) the tangent stiffness at the two stable states (N/m).
+        between them (the maximum of U on a grid, refined by bisection on F), `barrier`
+        U(saddle) - U(folded) (J; both wells are at zero energy, so this is also the barrier seen
+        from the deployed state) and `stiffness` (2,) the tangent stiffness at the two stable
+        states (N/m).
         """
         L = self.interwell
-        grid = jnp.linspace(0.0, 1.0, n_grid)[1:-1] * L
+        grid = jnp.linspace(0.0, 1.0, n_grid) * L
         u = jax.vmap(self.energy)(grid)
-        x = grid[jnp.argmax(u)]
+        j = jnp.clip(jnp.argmax(u[1:-1]) + 1, 1, n_grid - 2)
 
-        def newton(_, x):
-            return x - self.force(x) / self.stiffness(x)
+        def bisect(_, lohi):
+            lo, hi = lohi
+            mid = 0.5 * (lo + hi)
+            right = self.force(mid) > 0  # F > 0 on the folded side of the saddle
+            return jnp.where(right, mid, lo), jnp.where(right, hi, mid)
 
-        x = jax.lax.fori_loop(0, newton_steps, newton, x)
+        lo, hi = jax.lax.fori_loop(0, bisections, bisect, (grid[j - 1], grid[j + 1]))
+        x = 0.5 * (lo + hi)
         stable = jnp.stack([jnp.zeros_like(L), L])
         return {
             "stable": stable,
@@ -186,6 +184,43 @@ class KreslingCell(eqx.Module):
             "barrier": self.energy(x) - self.energy(stable[0]),
             "stiffness": jax.vmap(self.stiffness)(stable),
         }
+
+
+def _newton_twist(cell: KreslingCell, h):
+    """phi with dU/dphi(h, phi) = 0: safeguarded Newton from the linear twist."""
+    phi_f, phi_d = cell.stress_free_twists()
+    phi = phi_f + (phi_d - phi_f) * (h - cell.h_folded) / cell.interwell
+    dU = jax.grad(cell.truss_energy, argnums=1)
+    d2U = jax.grad(dU, argnums=1)
+    max_step = 0.25 * (phi_f - phi_d)
+
+    def newton(_, p):
+        g, k = dU(h, p), d2U(h, p)
+        # Newton where the energy is convex in phi, else a descent step; clipped.
+        step = jnp.where(k > 0, -g / jnp.where(k > 0, k, 1.0), -jnp.sign(g) * max_step)
+        return p + jnp.clip(step, -max_step, max_step)
+
+    return jax.lax.fori_loop(0, cell.newton_steps, newton, phi)
+
+
+@jax.custom_jvp
+def _torque_free_twist(cell: KreslingCell, h):
+    return _newton_twist(cell, h)
+
+
+@_torque_free_twist.defjvp
+def _torque_free_twist_jvp(primals, tangents):
+    # Implicit function theorem on g(cell, h, phi) = dU/dphi = 0: no differentiation through
+    # the Newton iterations (cheap to compile, exact at convergence, any order).
+    cell, h = primals
+    phi = _torque_free_twist(cell, h)
+
+    def g(c, hh, p):
+        return jax.grad(c.truss_energy, argnums=1)(hh, p)
+
+    _, g_dot = jax.jvp(lambda c, hh: g(c, hh, phi), (cell, h), tangents)
+    g_phi = jax.grad(g, argnums=2)(cell, h, phi)
+    return phi, -g_dot / g_phi
 
 
 class KreslingChain(AbstractMechanicalModel):
@@ -216,21 +251,29 @@ class KreslingChain(AbstractMechanicalModel):
         return self.cells.interwell
 
 
+@eqx.filter_jit
+def _equilibria(cells: KreslingCell) -> dict:
+    if jnp.ndim(cells.radius) == 0:
+        return cells.equilibria()
+    return jax.vmap(lambda c: c.equilibria())(cells)
+
+
 def cell_equilibria(model: "KreslingChain | KreslingCell") -> dict:
     """Stable states (folded, deployed), saddle and energy barrier of every cell.
 
     **Returns:** a dict of NumPy arrays: `stable` (dof, 2) deformations of the folded (0) and
-    deployed (L) states, `unstable` (dof,), `barrier` (dof,) in J, `stiffness` (dof, 2) in N/m.
+    deployed (L) states, `unstable` (dof,), `barrier` (dof,) in J (the energy to climb from
+    either well to the saddle: both wells are at zero energy) and `stiffness` (dof, 2), the
+    tangent stiffness at the two stable states in N/m. A single unbatched cell gives shapes
+    (2,), (), (), (2,).
     """
     cells = model.cells if isinstance(model, KreslingChain) else model
-    batched = jnp.ndim(cells.radius) > 0
-    fn = eqx.filter_jit(lambda c: jax.vmap(lambda ci: ci.equilibria())(c) if batched else c.equilibria())
-    out = fn(cells)
-    return {k: np.atleast_1d(np.asarray(v)) if not batched else np.asarray(v) for k, v in out.items()}
+    return {k: np.asarray(v) for k, v in _equilibria(cells).items()}
 
 
-def _unit_stiffness(cell: KreslingCell) -> Float[Array, ""]:
-    return cell.stiffness(0.0)
+@eqx.filter_jit
+def _folded_stiffness(cells: KreslingCell):
+    return jax.vmap(lambda c: c.stiffness(0.0))(cells)
 
 
 def kresling_chain(
@@ -274,7 +317,7 @@ def kresling_chain(
     unit = KreslingCell(jnp.asarray(geo["radius"]), jnp.asarray(geo["h_folded"]),
                         jnp.asarray(geo["h_deployed"]), jnp.ones(d), jnp.full(d, 1.0 / bar_ratio),
                         jnp.zeros(d), jnp.zeros(d), n_sides=n_sides, twist=twist)
-    k_unit = np.asarray(jax.vmap(_unit_stiffness)(unit))
+    k_unit = np.asarray(_folded_stiffness(unit))
     scale = k / k_unit
     zeta = np.broadcast_to(np.asarray(damping_ratio, float), (d,))
     c_well = 2 * zeta * np.sqrt(k * m)
