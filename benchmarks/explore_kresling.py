@@ -10,8 +10,17 @@ configurations (`make_recordings`), then `reconstruct` (GMR) and `gmc_sindy`, an
   saddle, deployed L), and the energy barrier.
 
 Usage:
-    python benchmarks/explore_kresling.py [--system kresling5|kresling3] [--twist linear|torque_free]
-        [--amp 3e-4 5e-4] [--snr 60] [--r 5 --d 5] [--seed 0] [--json OUT.json]
+    python benchmarks/explore_kresling.py [--system kresling5|kresling3]
+        [--twist linear|torque_free]
+        [--amp 3e-4 5e-4] [--snr 60] [--r 5 --d 5] [--gmc-r 7 --gmc-d 7] [--seeds 0 1 2]
+        [--screen 3] [--origin folded|base] [--duration 60] [--quiet] [--json OUT.json]
+
+The numbers reported for the issue came from (see the final report for the table):
+    python benchmarks/explore_kresling.py --amp 2e-4 3e-4 5e-4 1e-3 --seeds 0 1 2 --screen 3 --quiet
+    python benchmarks/explore_kresling.py --amp 3e-4 1e-3 --gmc-r 7 --gmc-d 7 --screen 3 --quiet
+    python benchmarks/explore_kresling.py --snr 40 --amp 5e-4 1e-3 --seeds 0 1 --screen 3 --quiet
+    python benchmarks/explore_kresling.py --system kresling3 --amp 3e-4 5e-4 1e-3 --screen 3
+    python benchmarks/explore_kresling.py --twist torque_free --amp 3e-4 5e-4 1e-3 --screen 3
 """
 
 import argparse
@@ -69,21 +78,61 @@ def screened(rec, z: float):
     stiff, vdamp, pdamp, orders = [], [], [], []
     for dof in rec.dofs:
         coef = np.where(np.abs(dof.local_coef) < z * dof.local_stderr, 0.0, dof.local_coef)
-        n, p = coef.shape
-        fits = LocalFit(equilibrium=jnp.asarray(dof.equilibria), coef=jnp.asarray(coef),
-                        covariance=jnp.asarray(np.stack([np.diag(se**2) for se in dof.local_stderr])),
-                        threshold=jnp.asarray(dof.thresholds), rss=jnp.zeros(n), n_samples=jnp.ones(n))
+        n = coef.shape[0]
+        fits = LocalFit(
+            equilibrium=jnp.asarray(dof.equilibria),
+            coef=jnp.asarray(coef),
+            covariance=jnp.asarray(np.stack([np.diag(se**2) for se in dof.local_stderr])),
+            threshold=jnp.asarray(dof.thresholds),
+            rss=jnp.zeros(n),
+            n_samples=jnp.ones(n),
+        )
         g = coordinate(fits, lib).value
         stiff.append(np.asarray(g.stiffness)), vdamp.append(np.asarray(g.velocity_damping))
         pdamp.append(np.asarray(g.position_damping))
-        orders.append(np.asarray(gmr_jax.coordination._hermite.highest_order(
-            jnp.asarray(coef[:, lib.indices("stiffness")] != 0))).tolist())
-    size = max(a.shape[0] for a in stiff)
-    pad = lambda arrs: jnp.asarray(np.stack([np.pad(a, (0, size - a.shape[0])) for a in arrs]))  # noqa: E731
-    sized = lambda arrs: jnp.asarray(np.stack([np.pad(a, (0, max(x.shape[0] for x in arrs) - a.shape[0])) for a in arrs]))  # noqa: E731
-    model = GlobalModel(masses=m.masses, stiffness=pad(stiff), velocity_damping=sized(vdamp),
-                        position_damping=sized(pdamp), topology=m.topology)
+        orders.append(
+            np.asarray(
+                gmr_jax.coordination._hermite.highest_order(
+                    jnp.asarray(coef[:, lib.indices("stiffness")] != 0)
+                )
+            ).tolist()
+        )
+
+    def pad(arrs):
+        size = max(a.shape[0] for a in arrs)
+        return jnp.asarray(np.stack([np.pad(a, (0, size - a.shape[0])) for a in arrs]))
+
+    model = GlobalModel(
+        masses=m.masses,
+        stiffness=pad(stiff),
+        velocity_damping=pad(vdamp),
+        position_damping=pad(pdamp),
+        topology=m.topology,
+    )
     return model, orders
+
+
+def interleave(recs, n_chunks: int, n_folds: int = 5):
+    """Reorder the samples so that each of the `n_folds` contiguous CV blocks of the local fits
+    holds every n_folds-th of `n_chunks` chunks, i.e. spans the whole sweep (a proposed change
+    of the CV fold design, emulated here: the fits use x, v, a and inputs sample by sample, so
+    only the CV blocks see the order)."""
+    from dataclasses import replace
+
+    out = []
+    for r in recs:
+        n = r.x.shape[0]
+        chunks = np.array_split(np.arange(n), n_chunks)
+        order = np.concatenate(
+            [chunks[k] for f in range(n_folds) for k in range(f, n_chunks, n_folds)]
+        )
+        fields = {
+            k: getattr(r, k)[order]
+            for k in ("x", "v", "a", "base_acc", "force")
+            if getattr(r, k) is not None
+        }
+        out.append(replace(r, **fields))
+    return out
 
 
 def evaluate(system, rec_model, n_grid=801, n_v=41, offset=None):
@@ -94,7 +143,7 @@ def evaluate(system, rec_model, n_grid=801, n_v=41, offset=None):
     for i in range(d):
         lo, hi = system.x_range[i]
         xs = np.linspace(lo, hi, n_grid)
-        cell = jax.tree_util.tree_map(lambda a: a[i], truth.cells)
+        cell = jax.tree_util.tree_map(lambda a, i=i: a[i], truth.cells)
         f_true = np.asarray(jax.vmap(cell.force)(jnp.asarray(xs)))
         off = 0.0 if offset is None else float(offset[i])
         coef = np.asarray(rec_model.stiffness[i])
@@ -115,16 +164,29 @@ def evaluate(system, rec_model, n_grid=801, n_v=41, offset=None):
         unstable = [r for r, s in roots if not s]
         L = eq["stable"][i, 1]
         # match: exactly 2 stable (near 0 and L) and 1 unstable between them
-        ok = (len(stable) == 2 and len(unstable) == 1 and abs(stable[0]) < 0.1 * L
-              and abs(stable[1] - L) < 0.1 * L and stable[0] < unstable[0] < stable[1])
+        ok = (
+            len(stable) == 2
+            and len(unstable) == 1
+            and abs(stable[0]) < 0.1 * L
+            and abs(stable[1] - L) < 0.1 * L
+            and stable[0] < unstable[0] < stable[1]
+        )
         barrier = barrier_of_poly(coef, stable[0], unstable[0]) if ok else float("nan")
-        out.append({
-            "cell": i + 1, "restoring_rel_l2": err_r, "damping_rel_l2": err_d,
-            "stable": stable, "unstable": unstable, "equilibria_match": bool(ok),
-            "stable_err_over_L": [float(stable[0] / L), float((stable[1] - L) / L)] if ok else None,
-            "saddle_err_over_L": float((unstable[0] - eq["unstable"][i]) / L) if ok else None,
-            "barrier_rel_err": float(barrier / eq["barrier"][i] - 1) if ok else None,
-        })
+        out.append(
+            {
+                "cell": i + 1,
+                "restoring_rel_l2": err_r,
+                "damping_rel_l2": err_d,
+                "stable": stable,
+                "unstable": unstable,
+                "equilibria_match": bool(ok),
+                "stable_err_over_L": [float(stable[0] / L), float((stable[1] - L) / L)]
+                if ok
+                else None,
+                "saddle_err_over_L": float((unstable[0] - eq["unstable"][i]) / L) if ok else None,
+                "barrier_rel_err": float(barrier / eq["barrier"][i] - 1) if ok else None,
+            }
+        )
     return out
 
 
@@ -132,56 +194,87 @@ def _line(e):
     if e["equilibria_match"]:
         eq = f"(saddle {100 * e['saddle_err_over_L']:+.2f}% L, barrier {100 * e['barrier_rel_err']:+.1f}%)"
     else:
-        eq = (f"stable {np.round(np.array(e['stable']) * 1e3, 2)} mm "
-              f"unstable {np.round(np.array(e['unstable']) * 1e3, 2)} mm")
-    return (f"    cell {e['cell']}: F_r err {100 * e['restoring_rel_l2']:7.3f}%  F_d err "
-            f"{100 * e['damping_rel_l2']:9.3f}%  equilibria match {e['equilibria_match']} {eq}")
+        eq = (
+            f"stable {np.round(np.array(e['stable']) * 1e3, 2)} mm "
+            f"unstable {np.round(np.array(e['unstable']) * 1e3, 2)} mm"
+        )
+    return (
+        f"    cell {e['cell']}: F_r err {100 * e['restoring_rel_l2']:7.3f}%  F_d err "
+        f"{100 * e['damping_rel_l2']:9.3f}%  equilibria match {e['equilibria_match']} {eq}"
+    )
 
 
 def run_one(system, amp, seed, args, L):
     t0 = time.time()
-    recs = gmr_jax.make_recordings(system, amp, snr_db=args.snr if args.snr > 0 else None, seed=seed)
+    recs = gmr_jax.make_recordings(
+        system, amp, snr_db=args.snr if args.snr > 0 else None, seed=seed, duration=args.duration
+    )
     t_sim = time.time() - t0
     ratios = [(0.5 * np.ptp(r.x, axis=0) / L).tolist() for r in recs]
     offset = None
     if args.origin == "base":
         offset = np.asarray(system.truth.cells.h_folded)
         recs = shift_recordings(recs, offset)
-    print(f"\n=== amplitude {amp * 1e3:.3g} mm, SNR {args.snr} dB, seed {seed}, origin {args.origin} "
-          f"(simulation {t_sim:.1f} s)")
+    print(
+        f"\n=== amplitude {amp * 1e3:.3g} mm, SNR {args.snr} dB, seed {seed}, origin {args.origin} "
+        f"(simulation {t_sim:.1f} s)"
+    )
     for r, q in zip(recs, ratios):
         print(f"  amplitude ratio {r.name}: " + " ".join(f"{100 * v:.2f}%" for v in q))
-    entry = {"origin": args.origin, "amplitude": amp, "seed": seed, "snr_db": args.snr,
-             "amplitude_ratio": ratios}
+    entry = {
+        "origin": args.origin,
+        "amplitude": amp,
+        "seed": seed,
+        "snr_db": args.snr,
+        "amplitude_ratio": ratios,
+    }
     methods = [("GMR", lambda: gmr_jax.reconstruct(recs, gmr_jax.Library(args.r, args.d)))]
+    if args.interleave:
+        methods.append(
+            (
+                f"GMR+interleave{args.interleave}",
+                lambda: gmr_jax.reconstruct(
+                    interleave(recs, args.interleave), gmr_jax.Library(args.r, args.d)
+                ),
+            )
+        )
     if not args.no_gmc:
         gr, gd = args.gmc_r or args.r, args.gmc_d or args.d
-        methods.append((f"GMC-SINDy({gr},{gd})", lambda: gmr_jax.gmc_sindy(recs, gmr_jax.Library(gr, gd))))
+        methods.append(
+            (f"GMC-SINDy({gr},{gd})", lambda: gmr_jax.gmc_sindy(recs, gmr_jax.Library(gr, gd)))
+        )
     for name, fn in methods:
         t0 = time.time()
         try:
             rec = fn()
-        except Exception as e:  # report and go on
+        except Exception as e:  # noqa: BLE001  (report any failure and go on)
             print(f"  {name}: failed: {e}")
             entry[name] = {"error": str(e)}
             continue
         dt = time.time() - t0
         variants = [(name, rec.model, None)]
-        if name == "GMR":
+        if name.startswith("GMR"):
             variants[0] = (name, rec.model, [d.stats.get("r_i") for d in rec.dofs])
             if args.screen > 0:
                 model, orders = screened(rec, args.screen)
-                variants.append((f"GMR+screen{args.screen:g}", model, orders))
+                variants.append((f"{name}+screen{args.screen:g}", model, orders))
         for vname, model, orders in variants:
             ev = evaluate(system, model, offset=offset)
             worst = max(e["restoring_rel_l2"] for e in ev)
             extra = f" local orders r_i: {orders}" if orders is not None else ""
-            print(f"  {vname} ({dt:.1f} s) worst F_r err {100 * worst:.2f}%, all equilibria match "
-                  f"{all(e['equilibria_match'] for e in ev)}{extra}")
+            print(
+                f"  {vname} ({dt:.1f} s) worst F_r err {100 * worst:.2f}%, all equilibria match "
+                f"{all(e['equilibria_match'] for e in ev)}{extra}"
+            )
             if not args.quiet:
                 for e in ev:
                     print(_line(e))
-            entry[vname] = {"cells": ev, "seconds": dt, "model": model.terms(), "local_orders": orders}
+            entry[vname] = {
+                "cells": ev,
+                "seconds": dt,
+                "model": model.terms(),
+                "local_orders": orders,
+            }
     return entry
 
 
@@ -197,20 +290,37 @@ def main():
     ap.add_argument("--gmc-d", type=int, default=None)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--no-gmc", action="store_true")
-    ap.add_argument("--origin", default="folded", choices=["folded", "base"],
-                    help="coordinate origin given to the fits: the folded state (x = h - h_f, the "
-                         "system's own) or the cell's base plate (x = h, absolute height)")
+    ap.add_argument(
+        "--origin",
+        default="folded",
+        choices=["folded", "base"],
+        help="coordinate origin given to the fits: the folded state (x = h - h_f, the "
+        "system's own) or the cell's base plate (x = h, absolute height)",
+    )
     ap.add_argument("--json", default=None)
-    ap.add_argument("--screen", type=float, default=0.0,
-                    help="also report GMR with local coefficients |c| < SCREEN * stderr zeroed")
+    ap.add_argument(
+        "--screen",
+        type=float,
+        default=0.0,
+        help="also report GMR with local coefficients |c| < SCREEN * stderr zeroed",
+    )
+    ap.add_argument(
+        "--interleave",
+        type=int,
+        default=0,
+        help="also report GMR with CV folds interleaved over this many chunks",
+    )
+    ap.add_argument("--duration", type=float, default=None, help="s (default: the system's)")
     ap.add_argument("--seeds", type=int, nargs="+", default=None, help="several noise seeds")
     ap.add_argument("--quiet", action="store_true", help="one summary line per method")
     args = ap.parse_args()
     system = {"kresling5": kresling5, "kresling3": kresling3}[args.system](twist=args.twist)
     L = np.asarray(system.truth.interwell)
     eq = cell_equilibria(system.truth)
-    print(f"{system.name}: L = {np.round(L * 1e3, 2)} mm, saddle = {np.round(eq['unstable'] * 1e3, 2)} mm, "
-          f"barrier = {np.round(eq['barrier'] * 1e3, 3)} mJ, well stiffness = {np.round(eq['stiffness'], 1).tolist()} N/m")
+    print(
+        f"{system.name}: L = {np.round(L * 1e3, 2)} mm, saddle = {np.round(eq['unstable'] * 1e3, 2)} mm, "
+        f"barrier = {np.round(eq['barrier'] * 1e3, 3)} mJ, well stiffness = {np.round(eq['stiffness'], 1).tolist()} N/m"
+    )
     results = []
     seeds = args.seeds or [args.seed]
     for amp in args.amp:

@@ -56,3 +56,38 @@ def test_no_recompile_for_new_grid_values_or_coefficients():
     m2 = eqx.tree_at(lambda q: q.stiffness, m, m.stiffness * 1.01)
     basin_map(m2, jnp.array([1.5, 3.0]), jnp.array([0.7]), wells)
     assert _sweep._sweep_points._cached._cache_size() == before
+
+
+def test_sharded_over_two_host_devices_matches_and_does_not_recompile():
+    import subprocess
+    import sys
+    import textwrap
+
+    code = textwrap.dedent("""
+        import os
+        os.environ["XLA_FLAGS"] = "--xla_force_host_platform_device_count=2"
+        import jax, jax.numpy as jnp, numpy as np
+        import gmr_jax as g
+        from gmr_jax.basins import _sweep
+        from gmr_jax.basins._sweep import basin_map
+        from gmr_jax.basins._wells import stable_wells
+        assert len(jax.devices()) == 2
+        terms = []
+        for i, (k1, k3) in enumerate([(-30.0, 1e5), (-60.0, 2e5)]):
+            terms += [{"dof": i, "physics": "stiffness", "order": 1, "coefficient": k1},
+                      {"dof": i, "physics": "stiffness", "order": 3, "coefficient": k3},
+                      {"dof": i, "physics": "velocity_damping", "order": 1, "coefficient": 0.5}]
+        m = g.from_terms([0.05, 0.05], terms, "chain")
+        w = stable_wells(m, [[-0.05, 0.05]] * 2)
+        f, A = jnp.linspace(0.5, 4, 5), jnp.linspace(0.3, 2.5, 3)
+        two = basin_map(m, f, A, w, chunk=4)
+        one = basin_map(m, f, A, w, chunk=4, devices=jax.devices()[:1])
+        assert np.array_equal(np.asarray(two.config), np.asarray(one.config))
+        run = _sweep._sharded(tuple(jax.devices()), 4)
+        n = run._cached._cache_size()
+        basin_map(m, f + 0.1, A + 0.1, w, chunk=4)
+        assert run._cached._cache_size() == n
+        print("OK")
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0 and "OK" in r.stdout, r.stderr[-2000:]

@@ -10,6 +10,7 @@ import pytest
 
 import gmr_jax
 from gmr_jax.systems._kresling import (
+    KRESLING5_AMPLITUDE,
     KreslingCell,
     KreslingChain,
     cell_equilibria,
@@ -66,14 +67,16 @@ def test_restoring_force_is_the_energy_gradient(chain):
     L = float(cell.interwell)
     h = 1e-7 * L
     xs = jnp.linspace(-0.2 * L, 1.2 * L, 9)
-    u_plus, f, k = _profile(cell, xs + h)
+    u_plus, f, _ = _profile(cell, xs + h)
     u_minus, f_minus, _ = _profile(cell, xs - h)
     _, f0, k0 = _profile(cell, xs)
     fd = (u_plus - u_minus) / (2 * h)
     scale = float(jnp.max(jnp.abs(f0)))
     np.testing.assert_allclose(np.asarray(f0), np.asarray(fd), atol=1e-6 * scale)
     kd = (f - f_minus) / (2 * h)
-    np.testing.assert_allclose(np.asarray(k0), np.asarray(kd), atol=1e-6 * float(jnp.max(jnp.abs(k0))))
+    np.testing.assert_allclose(
+        np.asarray(k0), np.asarray(kd), atol=1e-6 * float(jnp.max(jnp.abs(k0)))
+    )
 
 
 def test_torque_free_twist_is_torque_free():
@@ -87,10 +90,10 @@ def test_torque_free_twist_is_torque_free():
         phi = jax.vmap(c.twist_angle)(xs)
         return jax.vmap(jax.grad(c.truss_energy, argnums=1))(c.h_folded + xs, phi), phi
 
-    tq, phi = torque(cell, xs)
+    tq, _ = torque(cell, xs)
     np.testing.assert_allclose(np.asarray(tq), 0.0, atol=1e-12)
     # unlike the linear guide, which needs a torque away from the wells
-    tq_lin, phi_lin = torque(lin, xs)
+    tq_lin, _ = torque(lin, xs)
     assert float(jnp.max(jnp.abs(tq_lin))) > 1e-3
     # both relations pass through the two stress-free states
     _, phi_wells = torque(cell, jnp.array([0.0, L]))
@@ -115,7 +118,11 @@ def test_jit_vmap_grad(chain):
     cells_f = [float(_profile(_cell(chain, i), x[i : i + 1])[1][0]) for i in range(3)]
     damp = np.asarray(chain.damping(x, v))
     np.testing.assert_allclose(np.asarray(f), np.array(cells_f) + damp, rtol=1e-12)
-    np.testing.assert_allclose(np.asarray(fs[1]), np.asarray(all_at_once(chain, 2 * x, v)[0] - chain.damping(2 * x, v)), rtol=1e-10)
+    np.testing.assert_allclose(
+        np.asarray(fs[1]),
+        np.asarray(all_at_once(chain, 2 * x, v)[0] - chain.damping(2 * x, v)),
+        rtol=1e-10,
+    )
     # grad in the state: the tangent stiffness matrix is diagonal and matches the cells
     np.testing.assert_allclose(np.asarray(jac - jnp.diag(jnp.diag(jac))), 0.0, atol=1e-12)
     for i in range(3):
@@ -128,7 +135,9 @@ def test_jit_vmap_grad(chain):
     def total(m):
         return jnp.sum(m.restoring(x) ** 2)
 
-    bumped = eqx.tree_at(lambda m: m.cells.k_b, chain, chain.cells.k_b * jnp.array([1.0, 1.0, 1.0 + eps]))
+    bumped = eqx.tree_at(
+        lambda m: m.cells.k_b, chain, chain.cells.k_b * jnp.array([1.0, 1.0, 1.0 + eps])
+    )
     fd = (float(total(bumped)) - float(total(chain))) / (eps * float(chain.cells.k_b[2]))
     np.testing.assert_allclose(float(g.cells.k_b[2]), fd, rtol=1e-4)
 
@@ -159,7 +168,9 @@ def test_systems():
         assert np.all(s.x_range[:, 0] < 0) and np.all(s.x_range[:, 1] > s.equilibria[1])
         assert s.orders == {"gmr": (5, 5), "gmc": (5, 5)}
         assert s.truth.topology == "chain" and s.truth.n_dof == d
-        f = eqx.filter_jit(lambda m, e: jax.vmap(m.restoring)(e))(s.truth, jnp.asarray(s.equilibria))
+        f = eqx.filter_jit(lambda m, e: jax.vmap(m.restoring)(e))(
+            s.truth, jnp.asarray(s.equilibria)
+        )
         np.testing.assert_allclose(np.asarray(f), 0.0, atol=1e-12)
     # cells stiffen from the base: the base cell is the softest
     k = cell_equilibria(kresling5().truth)["stiffness"][:, 0]
@@ -168,15 +179,16 @@ def test_systems():
 
 def test_recordings_are_finite_small_and_shrink_towards_the_tip():
     s = kresling5()
-    recs = gmr_jax.make_recordings(s, 5e-4, snr_db=None, duration=12.0)
+    recs = gmr_jax.make_recordings(s, KRESLING5_AMPLITUDE)
     L = np.asarray(s.truth.interwell)
     assert len(recs) == 2
     for r, e in zip(recs, s.equilibria):
         for sig in (r.x, r.v, r.a, r.base_acc):
             assert np.all(np.isfinite(sig))
         ratio = 0.5 * np.ptp(r.x, axis=0) / L
-        assert np.all(ratio < 0.15) and np.all(ratio > 1e-3)  # stays in its well: small vibrations
-        assert ratio[0] == ratio.max() and ratio[-1] == ratio.min()
+        # the documented amplitude ratios: a few percent at the base, shrinking to the tip
+        assert 0.04 < ratio[0] < 0.07 and 0.002 < ratio[-1] < 0.006
+        assert np.all(np.diff(ratio) < 0)
         np.testing.assert_allclose(r.x.mean(axis=0), e, atol=0.05 * L.min())
     np.testing.assert_allclose(recs[0].masses, np.asarray(s.truth.masses))
 

@@ -1,6 +1,8 @@
 """Deployment-basin sweeps over actuation grids (paper Fig. 11): vmapped diffrax, chunked,
 sharded over all devices, every member's result code kept."""
 
+import functools
+
 import diffrax as dfx
 import equinox as eqx
 import jax
@@ -108,6 +110,23 @@ def _sweep_points(model, settings, x0, fs, amps, wells, chunk: int):
     return jax.lax.map(one, pts, batch_size=chunk)
 
 
+@functools.lru_cache(maxsize=32)
+def _sharded(devices: tuple, chunk: int):
+    """The grid split over `devices` with shard_map; built once per (devices, chunk) so that
+    later calls hit the jit cache."""
+    mesh = Mesh(np.asarray(devices), ("grid",))
+
+    @eqx.filter_jit
+    def run(model, settings, x0, wells, fs, amps):
+        def local(fs, amps):
+            return _sweep_points(model, settings, x0, fs, amps, wells, chunk)
+
+        return jax.shard_map(local, mesh=mesh, in_specs=(P("grid"), P("grid")), out_specs=P("grid"),
+                             check_vma=False)(fs, amps)
+
+    return run
+
+
 def basin_map(
     model: AbstractMechanicalModel,
     f: Float[Array, " nf"],
@@ -153,13 +172,7 @@ def basin_map(
     if nd == 1:
         out = _sweep_points(model, settings, x0, flat_f, flat_a, wells, min(chunk, per))
     else:
-        mesh = Mesh(np.asarray(devices), ("grid",))
-
-        def local(fs, amps):
-            return _sweep_points(model, settings, x0, fs, amps, wells, min(chunk, per))
-
-        out = jax.jit(jax.shard_map(local, mesh=mesh, in_specs=(P("grid"), P("grid")),
-                                    out_specs=P("grid"), check_vma=False))(flat_f, flat_a)
+        out = _sharded(tuple(devices), min(chunk, per))(model, settings, x0, wells, flat_f, flat_a)
     idx, config, code, x1, v1 = (o[:n] for o in out)
     na, nf = A.shape[0], f.shape[0]
     d = x0.shape[0]

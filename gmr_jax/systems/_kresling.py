@@ -8,7 +8,7 @@ bottom one, joined by two families of n elastic bars (the creases of the origami
 
 with energy U = (n/2) [k_a (a - a0)² + k_b (b - b0)²]. The rest lengths a0, b0 are chosen so
 that both bar families are stress free at two heights: the folded height h_f and the deployed
-height h_d (with twists phi_f and phi_d = pi - phi_f, cos phi_f = -(h_d² - h_f²) / (4R² cos(pi/n))).
+height h_d, with twists phi_f and phi_d = pi - phi_f, cos phi_f = -(h_d² - h_f²) / (4R² cos(pi/n)).
 These are the two stable states; between them the bars cannot both be at rest, which makes the
 energy barrier. The restoring force F(x) = dU/dx is geometric and not a polynomial.
 
@@ -73,13 +73,13 @@ class KreslingCell(eqx.Module):
     - `newton_steps`: Newton iterations of the torque-free twist (static).
     """
 
-    radius: Float[ArrayLike, ""]
-    h_folded: Float[ArrayLike, ""]
-    h_deployed: Float[ArrayLike, ""]
-    k_a: Float[ArrayLike, ""]
-    k_b: Float[ArrayLike, ""]
-    c0: Float[ArrayLike, ""] = 0.0
-    c2: Float[ArrayLike, ""] = 0.0
+    radius: Float[ArrayLike, "*cells"]
+    h_folded: Float[ArrayLike, "*cells"]
+    h_deployed: Float[ArrayLike, "*cells"]
+    k_a: Float[ArrayLike, "*cells"]
+    k_b: Float[ArrayLike, "*cells"]
+    c0: Float[ArrayLike, "*cells"] = 0.0
+    c2: Float[ArrayLike, "*cells"] = 0.0
     n_sides: int = eqx.field(static=True, default=6)
     twist: str = eqx.field(static=True, default="linear")
     newton_steps: int = eqx.field(static=True, default=12)
@@ -306,17 +306,32 @@ def kresling_chain(
     d = k.shape[0]
     if m.shape[0] != d:
         raise ValueError(f"{d} stiffnesses but {m.shape[0]} masses")
-    geo = {name: np.broadcast_to(np.asarray(val, float), (d,)).copy()
-           for name, val in (("radius", radius), ("h_folded", h_folded), ("h_deployed", h_deployed))}
+    geo = {
+        name: np.broadcast_to(np.asarray(val, float), (d,)).copy()
+        for name, val in (("radius", radius), ("h_folded", h_folded), ("h_deployed", h_deployed))
+    }
     lim = 4 * geo["radius"] ** 2 * math.cos(math.pi / n_sides)
-    bad = (geo["h_deployed"] <= geo["h_folded"]) | (geo["h_folded"] <= 0) | (
-        geo["h_deployed"] ** 2 - geo["h_folded"] ** 2 >= lim)
+    bad = (
+        (geo["h_deployed"] <= geo["h_folded"])
+        | (geo["h_folded"] <= 0)
+        | (geo["h_deployed"] ** 2 - geo["h_folded"] ** 2 >= lim)
+    )
     if np.any(bad):
-        raise ValueError("need 0 < h_folded < h_deployed and h_deployed² - h_folded² < 4R² cos(pi/n) "
-                         "(no stress-free twist otherwise)")
-    unit = KreslingCell(jnp.asarray(geo["radius"]), jnp.asarray(geo["h_folded"]),
-                        jnp.asarray(geo["h_deployed"]), jnp.ones(d), jnp.full(d, 1.0 / bar_ratio),
-                        jnp.zeros(d), jnp.zeros(d), n_sides=n_sides, twist=twist)
+        raise ValueError(
+            "need 0 < h_folded < h_deployed and h_deployed² - h_folded² < 4R² cos(pi/n) "
+            "(no stress-free twist otherwise)"
+        )
+    unit = KreslingCell(
+        jnp.asarray(geo["radius"]),
+        jnp.asarray(geo["h_folded"]),
+        jnp.asarray(geo["h_deployed"]),
+        jnp.ones(d),
+        jnp.full(d, 1.0 / bar_ratio),
+        jnp.zeros(d),
+        jnp.zeros(d),
+        n_sides=n_sides,
+        twist=twist,
+    )
     k_unit = np.asarray(_folded_stiffness(unit))
     scale = k / k_unit
     zeta = np.broadcast_to(np.asarray(damping_ratio, float), (d,))
@@ -341,6 +356,10 @@ def kresling_chain(
 #: Table B5 grading), 40 g plates, 6-sided cells R = 50 mm, h_f = 20 mm, h_d = 50 mm (L = 30 mm).
 KRESLING5_STIFFNESS = (20.0, 32.0, 60.0, 100.0, 200.0)
 KRESLING5_MASSES = (0.04, 0.04, 0.04, 0.04, 0.04)
+#: Nominal base-displacement amplitude (m) for `make_recordings(kresling5(), ...)`: amplitude
+#: ratios (half peak-to-peak / L) about 5.1, 2.6, 2.4, 1.3, 0.35 % (folded) and 5.7, 2.8, 2.5,
+#: 1.4, 0.38 % (deployed), base to tip (0.5 mm: 8.5 ... 0.6 %; 1 mm: 16 ... 1.1 %).
+KRESLING5_AMPLITUDE = 3e-4
 
 
 def _interwell_box(chain: KreslingChain, margin: float = 0.1):
@@ -351,9 +370,13 @@ def _interwell_box(chain: KreslingChain, margin: float = 0.1):
 def kresling5(twist: str = "linear") -> System:
     """The 5-DOF Kresling-inspired deployable chain (paper Sec. 3.2, Fig. 8).
 
-    Cells numbered from the base; the base cell is the softest. Training data: base chirp
-    0.5-10 Hz over 30 s around the fully folded (0-0-0-0-0) and fully deployed (1-1-1-1-1)
-    configurations. Metrics box: x from 10 % before the folded to 10 % past the deployed state.
+    Cells numbered from the base; the base cell is the softest (folded-state stiffness
+    20, 32, 60, 100, 200 N/m; 40 g plates; linear modes 1.25, 4.8, 7.6, 11.2, 17.4 Hz folded).
+    Training data: base chirp 0.5-10 Hz over 30 s around the fully folded (0-0-0-0-0) and fully
+    deployed (1-1-1-1-1) configurations; `KRESLING5_AMPLITUDE` (0.3 mm) gives amplitude ratios
+    of a few percent of the interwell distance at the base, shrinking towards the tip.
+    Metrics box: x from 10 % before the folded to 10 % past the deployed state, |v| <= 0.1 m/s.
+    `twist="torque_free"` gives the harder, strongly asymmetric variant.
     """
     chain = kresling_chain(KRESLING5_STIFFNESS, KRESLING5_MASSES, twist=twist)
     L = np.asarray(chain.interwell)
@@ -367,15 +390,19 @@ def kresling5(twist: str = "linear") -> System:
         x_range=_interwell_box(chain),
         v_range=np.tile([[-0.1, 0.1]], (L.shape[0], 1)),
         orders={"gmr": (5, 5), "gmc": (5, 5)},
-        description=f"5-cell Kresling-inspired bistable truss chain ({twist} twist), base excited",
+        description=f"5-cell Kresling-inspired bistable truss chain ({twist} twist), base excited "
+        f"(nominal amplitude {KRESLING5_AMPLITUDE * 1e3:g} mm)",
         units=("x [m]", "x' [m/s]", "F [N]"),
     )
 
 
-#: 3-cell prototype-like chain (paper Sec. 4, Fig. 12): the middle cell stiffest, as in the
-#: prototype's Table B7 (folded-state stiffness ratio about 4 : 5 : 1 there; milder here).
+#: 3-cell prototype-like chain (paper Sec. 4, Fig. 12): one stiff and one soft cell, echoing the
+#: prototype's Table B7 (folded-state stiffness about 4 : 5 : 1 there, in the paper's numbering,
+#: which may run from the tip; milder here), 50 g plates.
 KRESLING3_STIFFNESS = (40.0, 60.0, 25.0)
 KRESLING3_MASSES = (0.05, 0.05, 0.05)
+#: Nominal base amplitude (m): amplitude ratios about 5.5, 3.0, 5.5 % (folded), 6.0, 3.1, 5.9 %.
+KRESLING3_AMPLITUDE = 3e-4
 
 
 def kresling3(twist: str = "linear") -> System:
@@ -393,6 +420,7 @@ def kresling3(twist: str = "linear") -> System:
         x_range=_interwell_box(chain),
         v_range=np.tile([[-0.1, 0.1]], (L.shape[0], 1)),
         orders={"gmr": (5, 5), "gmc": (5, 5)},
-        description=f"3-cell Kresling-inspired bistable truss chain ({twist} twist), base excited",
+        description=f"3-cell Kresling-inspired bistable truss chain ({twist} twist), base excited "
+        f"(nominal amplitude {KRESLING3_AMPLITUDE * 1e3:g} mm)",
         units=("x [m]", "x' [m/s]", "F [N]"),
     )
