@@ -13,12 +13,18 @@ Usage:
     python benchmarks/explore_kresling.py [--system kresling5|kresling3]
         [--twist linear|torque_free]
         [--amp 3e-4 5e-4] [--snr 60] [--r 5 --d 5] [--gmc-r 7 --gmc-d 7] [--seeds 0 1 2]
-        [--screen 3] [--origin folded|base] [--duration 60] [--quiet] [--json OUT.json]
+        [--screen 3] [--interleave 50] [--origin folded|base] [--duration 60] [--quiet]
+        [--json OUT.json]
 
-The numbers reported for the issue came from (see the final report for the table):
-    python benchmarks/explore_kresling.py --amp 2e-4 3e-4 5e-4 1e-3 --seeds 0 1 2 --screen 3 --quiet
+`--screen Z` and `--interleave N` emulate two proposed changes to the local fits without
+touching the library (see `screened` and `interleave`). The numbers reported for the issue:
+    python benchmarks/explore_kresling.py --amp 2e-4 3e-4 5e-4 1e-3 --seeds 0 1 2 --screen 3 \
+        --interleave 50 --quiet
     python benchmarks/explore_kresling.py --amp 3e-4 1e-3 --gmc-r 7 --gmc-d 7 --screen 3 --quiet
-    python benchmarks/explore_kresling.py --snr 40 --amp 5e-4 1e-3 --seeds 0 1 --screen 3 --quiet
+    python benchmarks/explore_kresling.py --snr 40 --amp 5e-4 1e-3 --seeds 0 1 --screen 3 \
+        --interleave 50 --quiet
+    python benchmarks/explore_kresling.py --snr 0 --amp 3e-4          # noise free
+    python benchmarks/explore_kresling.py --origin base --amp 3e-4 1e-3 --quiet
     python benchmarks/explore_kresling.py --system kresling3 --amp 3e-4 5e-4 1e-3 --screen 3
     python benchmarks/explore_kresling.py --twist torque_free --amp 3e-4 5e-4 1e-3 --screen 3
 """

@@ -41,6 +41,17 @@ from .simulate._inputs import (
     Sampled as Sampled,
 )
 from .simulate._simulate import Integrator as Integrator, simulate as simulate
+from .basins._sweep import BasinMap as BasinMap, SweepSettings as SweepSettings, basin_map as basin_map
+from .basins._wells import stable_wells as stable_wells
+from .simulate._frequency import transmissibility as transmissibility
+from .systems._kresling import (
+    KreslingCell as KreslingCell,
+    KreslingChain as KreslingChain,
+    cell_equilibria as cell_equilibria,
+    kresling3 as kresling3,
+    kresling5 as kresling5,
+    kresling_chain as kresling_chain,
+)
 from .systems._paper_cases import bistable_joint as bistable_joint, tristable_nes as tristable_nes
 from .systems._system import System as System, make_recordings as make_recordings
 

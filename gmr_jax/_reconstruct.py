@@ -130,6 +130,13 @@ def training_scores(model: GlobalModel, recs, masses, topology) -> dict:
     return out
 
 
+def _screen(fits: LocalFit, n_sigma: float) -> LocalFit:
+    se = jnp.sqrt(jnp.clip(jnp.diagonal(fits.covariance, axis1=1, axis2=2), 0.0))
+    keep = jnp.abs(fits.coef) >= n_sigma * se
+    cov = jnp.where(keep[:, :, None] & keep[:, None, :], fits.covariance, 0.0)
+    return eqx.tree_at(lambda f: (f.coef, f.covariance), fits, (jnp.where(keep, fits.coef, 0.0), cov))
+
+
 def _fit_wells(xs, vs, ys, w, library, solver, select):
     # One jitted fit per well (same shapes: compiled once), stacked. A vmap over wells with
     # batched weights and the CV threshold sweep stalled in XLA:CPU (jax 0.10), so loop here.
@@ -147,6 +154,7 @@ def reconstruct(
     topology: str | None = None,
     masses=None,
     well_tol: float = 0.1,
+    screen_sigma: float | None = 3.0,
 ) -> Reconstruction:
     """Global model reconstruction, Algorithm 1, from small-vibration recordings.
 
@@ -158,6 +166,10 @@ def reconstruct(
     - `solver`, `select`: STLS settings; `select=None` uses `solver.threshold` as given.
     - `topology`: "chain" (default for several DOFs) or "independent".
     - `masses`: per DOF; default from the recordings, else 1 (per unit mass).
+    - `screen_sigma`: before the coordination, a local coefficient smaller than `screen_sigma`
+      standard errors is set to zero (a t-test on each kept term): the Hermite solve takes every
+      local coefficient as exact, so an insignificant high-order term kept by the threshold
+      rule would otherwise raise the global degree and distort the model. None disables it.
     - `well_tol`: recordings whose mean deformation of a cell differs by less than this
       fraction of that cell's spread are taken as the same well of that cell and pooled.
 
@@ -184,6 +196,8 @@ def reconstruct(
         ys, _ = _pad_stack([[targets[k][:, i] for k in g] for g in groups])
         sols = _fit_wells(jnp.asarray(xs), jnp.asarray(vs), jnp.asarray(ys), jnp.asarray(w), library, solver, select)
         fits: LocalFit = sols.value
+        if screen_sigma is not None:
+            fits = _screen(fits, screen_sigma)
         bad = np.asarray(sols.result._value) != RESULTS.successful._value
         if np.any(bad):
             k = int(np.argmax(bad))

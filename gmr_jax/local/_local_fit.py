@@ -61,7 +61,7 @@ def fit_local(
         grid = default_thresholds(theta, y, select.n_grid, select.lo, weights)
         sel = select_threshold(theta, y, grid, solver, n_folds=select.n_folds, weights=weights)
         solver = eqx.tree_at(lambda s: s.threshold, solver, sel.value)
-        cv = {"cv_" + k: v for k, v in sel.stats.items()}
+        cv = {("" if k.startswith("cv_") else "cv_") + k: v for k, v in sel.stats.items()}
     else:
         cv = {}
     qr = compress(theta, y, weights)
