@@ -70,3 +70,23 @@ def test_bad_inputs_one_line_exit_2(joint_files, tmp_path):
     assert r.returncode == 2 and "same equilibrium" in r.stderr
     r = run(["fit", str(tmp_path / "missing.csv"), "--out", str(tmp_path / "m.json")])
     assert r.returncode == 2 and "no such file" in r.stderr
+
+
+def test_basins_cli(tmp_path):
+    terms = []
+    for i, (k1, k3) in enumerate([(-30.0, 1e5), (-60.0, 2e5)]):
+        terms += [{"dof": i, "physics": "stiffness", "order": 1, "coefficient": k1},
+                  {"dof": i, "physics": "stiffness", "order": 3, "coefficient": k3},
+                  {"dof": i, "physics": "velocity_damping", "order": 1, "coefficient": 0.5}]
+    g.save_model(g.from_terms([0.05, 0.05], terms, "chain"), tmp_path / "m.json")
+    out = tmp_path / "b"
+    assert main(["basins", str(tmp_path / "m.json"), "--f", "0.5:4:3", "--A", "0.3:2.5:2",
+                 "--x-range=-0.05:0.05", "--out", str(out)]) == 0
+    z = np.load(out / "basins.npz")
+    assert z["wells"].shape == (2, 3, 2) and z["config"].shape == (2, 3) and (out / "basins.png").exists()
+    r = run(["basins", str(tmp_path / "m.json"), "--f", "0:4:3", "--A", "0.3:2.5:2", "--x-range=-0.05:0.05",
+             "--out", str(out)])
+    assert r.returncode == 2 and "f > 0" in r.stderr and "Traceback" not in r.stderr
+    r = run(["basins", str(tmp_path / "m.json"), "--f", "1:4:3", "--A", "0.3:2.5:2", "--x-range=abc",
+             "--out", str(out)])
+    assert r.returncode == 2 and "LO:HI" in r.stderr and "Traceback" not in r.stderr

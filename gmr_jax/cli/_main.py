@@ -90,9 +90,12 @@ def _cmd_basins(args):
 
     model = load_model(args.model)
     f, A = _grid(args.f, "f"), _grid(args.A, "A")
-    lo, hi = (float(v) for v in args.x_range.split(":")) if args.x_range else (None, None)
-    if lo is None:
-        raise GMRInputError("--x-range LO:HI is needed: the deformation interval in which to look for wells")
+    if not args.x_range:
+        raise GMRInputError("--x-range=LO:HI is needed: the deformation interval in which to look for wells")
+    try:
+        lo, hi = (float(v) for v in args.x_range.split(":"))
+    except ValueError:
+        raise GMRInputError(f"--x-range must be LO:HI (write --x-range=-0.05:0.05), got {args.x_range!r}") from None
     wells = stable_wells(model, [[lo, hi]] * model.n_dof)
     if np.any(np.isnan(wells[:, 0])):
         raise GMRInputError(f"no stable equilibrium found in [{lo}, {hi}] for some DOF: widen --x-range")
