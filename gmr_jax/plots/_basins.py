@@ -20,15 +20,22 @@ def basin_figure(f, A, config, n_dof: int, path, title: str = ""):
     values = sorted(set(config.ravel().tolist()))
     index = {v: k for k, v in enumerate(values)}
     img = np.vectorize(index.get)(config)
-    base = plt.get_cmap("tab20")
-    colors = [(0.15, 0.15, 0.15, 1.0) if v < 0 else base(k % 20) for k, v in enumerate(values)]
+    n_conf = sum(v >= 0 for v in values)
+    if n_conf <= 20:
+        base = plt.get_cmap("tab20")
+        pick = [base(k) for k in range(n_conf)]
+    else:  # distinct colours for every configuration (no reuse of a 20-colour cycle)
+        base = plt.get_cmap("nipy_spectral")
+        pick = [base(0.05 + 0.9 * k / max(n_conf - 1, 1)) for k in range(n_conf)]
+    it = iter(pick)
+    colors = [(0.15, 0.15, 0.15, 1.0) if v < 0 else next(it) for v in values]
     cmap = ListedColormap(colors)
     norm = BoundaryNorm(np.arange(len(values) + 1) - 0.5, len(values))
-    fig, ax = plt.subplots(figsize=(7.5, 5), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(7.5 if len(values) <= 16 else 10, 5), constrained_layout=True)
     ax.pcolormesh(np.asarray(f), np.asarray(A), img, cmap=cmap, norm=norm, shading="auto")
     handles = [plt.Rectangle((0, 0), 1, 1, color=colors[k]) for k in range(len(values))]
     ax.legend(handles, [config_label(v, n_dof) for v in values], title="final configuration",
-              bbox_to_anchor=(1.02, 1), loc="upper left", fontsize=8)
+              bbox_to_anchor=(1.02, 1), loc="upper left", fontsize=7, ncol=1 if len(values) <= 16 else 2)
     ax.set_xlabel("actuation frequency f [Hz]")
     ax.set_ylabel("actuation amplitude A")
     ax.set_title(title or "deployment basins (tip half-sine, Eq. 25)")
