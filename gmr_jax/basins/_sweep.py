@@ -14,6 +14,7 @@ from jaxtyping import Array, Float, Int
 from .._solution import RESULTS
 from ..model._model import AbstractMechanicalModel
 from ..simulate._inputs import HalfSineTip
+from ..simulate._simulate import _vector_field
 
 
 class SweepSettings(eqx.Module):
@@ -54,11 +55,6 @@ def _final_state(model, settings: SweepSettings, x0, f, a, centre, span):
     d = model.n_dof
     exc = HalfSineTip(f, a, n_dof=d)
 
-    def rhs(t, y, args):
-        x, v = y
-        b, force = exc(t)
-        return v, model.accelerations(x, v, b, force)
-
     t_off = 0.5 / f
     ctrl = dfx.ClipStepSizeController(dfx.PIDController(rtol=settings.rtol, atol=settings.atol),
                                       jump_ts=jnp.reshape(t_off, (1,)))
@@ -67,7 +63,7 @@ def _final_state(model, settings: SweepSettings, x0, f, a, centre, span):
         return jnp.max(jnp.abs(y[0] - centre) / span) > settings.bound
 
     sol = dfx.diffeqsolve(
-        dfx.ODETerm(rhs), dfx.Tsit5(), 0.0, t_off + settings.settle_time, None,
+        dfx.ODETerm(_vector_field(model, exc)), dfx.Tsit5(), 0.0, t_off + settings.settle_time, None,
         (x0, jnp.zeros_like(x0)), saveat=dfx.SaveAt(t1=True), stepsize_controller=ctrl,
         max_steps=settings.max_steps, event=dfx.Event(cond_fn), throw=False,
     )

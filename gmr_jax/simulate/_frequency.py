@@ -9,6 +9,7 @@ from jaxtyping import Array, Float
 from .._solution import RESULTS
 from ..model._model import AbstractMechanicalModel
 from ._inputs import BaseSine
+from ._simulate import _vector_field
 
 
 @eqx.filter_jit
@@ -38,13 +39,8 @@ def transmissibility(
         exc = BaseSine(amplitude, f, n_dof=model.n_dof)
         ts = t_settle + jnp.linspace(0.0, n_measure * period, 64 * n_measure + 1)
 
-        def rhs(t, y, args):
-            x, v = y
-            b, force = exc(t)
-            return v, model.accelerations(x, v, b, force)
-
         sol = dfx.diffeqsolve(
-            dfx.ODETerm(rhs), dfx.Tsit5(), 0.0, ts[-1], None, (x_eq, jnp.zeros_like(x_eq)),
+            dfx.ODETerm(_vector_field(model, exc)), dfx.Tsit5(), 0.0, ts[-1], None, (x_eq, jnp.zeros_like(x_eq)),
             saveat=dfx.SaveAt(ts=ts), stepsize_controller=dfx.PIDController(rtol=rtol, atol=atol),
             max_steps=400_000, throw=False,
         )
