@@ -265,7 +265,7 @@ def gmc_sindy(
         if select is not None:
             grid = default_thresholds(theta, y, select.n_grid, select.lo)
             sel = select_threshold(theta, y, grid, solver, n_folds=select.n_folds)
-            slv = STLS(sel.value, solver.alpha, solver.max_iter, solver.normalize_columns, solver.unbias)
+            slv = eqx.tree_at(lambda s: s.threshold, solver, sel.value)
         sol = stls_qr(compress(theta, y), slv)
         s, v_, p = coefficients_to_blocks(np.asarray(sol.value), library)
         stiff.append(s), vdamp.append(v_), pdamp.append(p)
