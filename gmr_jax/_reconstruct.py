@@ -155,6 +155,7 @@ def reconstruct(
     masses=None,
     well_tol: float = 0.1,
     screen_sigma: float | None = 3.0,
+    coordination: str = "gls",
 ) -> Reconstruction:
     """Global model reconstruction, Algorithm 1, from small-vibration recordings.
 
@@ -172,6 +173,8 @@ def reconstruct(
       rule would otherwise raise the global degree and distort the model. None disables it.
     - `well_tol`: recordings whose mean deformation of a cell differs by less than this
       fraction of that cell's spread are taken as the same well of that cell and pooled.
+    - `coordination`: "gls" (covariance-weighted, lowest adequate degree) or "hermite" (the
+      paper's exact interpolant); see `coordinate`.
 
     **Returns:** a `Reconstruction` with the `GlobalModel` (standard errors attached) and per-DOF
     reports (equilibria, local coefficients, global orders, condition numbers).
@@ -202,7 +205,7 @@ def reconstruct(
         if np.any(bad):
             k = int(np.argmax(bad))
             raise GMRInputError(f"DOF {i}, well {k}: local fit failed: {RESULTS[sols.result[k]]}")
-        coord = coordinate(fits, library, throw=False)
+        coord = coordinate(fits, library, method=coordination, throw=False)
         if coord.result != RESULTS.successful:
             raise GMRInputError(
                 f"DOF {i}: {RESULTS[coord.result]} (equilibria {np.asarray(fits.equilibrium).round(6).tolist()}, "
