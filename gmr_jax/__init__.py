@@ -15,6 +15,7 @@ from ._reconstruct import (
 from ._solution import RESULTS as RESULTS, Solution as Solution
 from .coordination._coordinate import GlobalCoefficients as GlobalCoefficients, coordinate as coordinate
 from .coordination._hermite import hermite_interpolate as hermite_interpolate
+from .coordination._gls import hermite_gls as hermite_gls
 from .local._library import Library as Library
 from .local._local_fit import AutoThreshold as AutoThreshold, LocalFit as LocalFit, fit_local as fit_local
 from .local._stls import STLS as STLS, stls as stls
@@ -43,7 +44,17 @@ from .simulate._inputs import (
 from .simulate._simulate import Integrator as Integrator, simulate as simulate
 from .basins._sweep import BasinMap as BasinMap, SweepSettings as SweepSettings, basin_map as basin_map
 from .basins._wells import stable_wells as stable_wells
-from .simulate._frequency import transmissibility as transmissibility
+from .metrics._metrics import (
+    damping_error as damping_error,
+    damping_error_map as damping_error_map,
+    energy_barriers as energy_barriers,
+    restoring_error as restoring_error,
+)
+from .simulate._frequency import (
+    resonance_frequencies as resonance_frequencies,
+    resonance_peaks as resonance_peaks,
+    transmissibility as transmissibility,
+)
 from .systems._kresling import (
     KreslingCell as KreslingCell,
     KreslingChain as KreslingChain,

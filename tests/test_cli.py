@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import gmr_jax as g
+from gmr_jax.metrics._metrics import restoring_error
 from gmr_jax.cli._main import main
 
 
@@ -90,3 +91,24 @@ def test_basins_cli(tmp_path):
     r = run(["basins", str(tmp_path / "m.json"), "--f", "1:4:3", "--A", "0.3:2.5:2", "--x-range=abc",
              "--out", str(out)])
     assert r.returncode == 2 and "LO:HI" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_fit_chain_recordings_one_file_per_configuration(tmp_path, capsys):
+    """`gmr fit` on a chain: one NPZ per configuration (folded, deployed) of the 3-cell Kresling
+    chain; the model is a 3-DOF chain with every cell's restoring force and wells right."""
+    s = g.kresling3()
+    paths = []
+    for r in g.make_recordings(s, 3e-4, seed=0, duration=15.0):
+        p = tmp_path / f"{r.name}.npz"
+        g.save_recording(r, p)
+        paths.append(str(p))
+    out = tmp_path / "chain.json"
+    assert main(["fit", *paths, "--out", str(out)]) == 0
+    assert "DOF 2" in capsys.readouterr().out
+    m = g.load_model(out)
+    assert m.topology == "chain" and m.n_dof == 3
+    np.testing.assert_allclose(np.asarray(m.masses), np.asarray(s.truth.masses))
+    for i in range(3):
+        assert restoring_error(m, s.truth, i, s.x_range[i]) < 0.03
+    wells = g.stable_wells(m, s.x_range)
+    np.testing.assert_allclose(wells[:, :2], s.equilibria.T, atol=0.02 * np.ptp(s.equilibria))

@@ -18,9 +18,14 @@ def _positive_int(s):
 
 
 def _cmd_demo(args):
-    from ._demo import run_demo
+    if args.system == "paper":
+        from ._demo import run_demo
 
-    run_demo(args.out)
+        run_demo(args.out)
+    else:
+        from ._demo_chain import run_chain_demo
+
+        run_chain_demo(args.system, args.out)
     return 0
 
 
@@ -127,6 +132,9 @@ def build_parser():
     sub = p.add_subparsers(dest="cmd", required=True)
     d = sub.add_parser("demo", help="run the built-in paper cases (GMR vs GMC-SINDy), write figures and a report")
     d.add_argument("--out", default="gmr_out", help="output folder (default gmr_out)")
+    d.add_argument("--system", choices=["paper", "kresling5", "kresling3"], default="paper",
+                   help="paper: the single-DOF cases (default); kresling5/kresling3: a Kresling chain, per cell, "
+                   "with transmissibility")
     d.set_defaults(fn=_cmd_demo)
     f = sub.add_parser("fit", help="reconstruct a global model from recordings (one per equilibrium)")
     f.add_argument("recordings", nargs="+", help="NPZ or CSV recordings")

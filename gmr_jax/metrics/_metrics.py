@@ -63,3 +63,25 @@ def equilibria(model, dof: int, x_range, n: int = 4001):
             x0 = xs[k] - f[k] * (xs[k + 1] - xs[k]) / (f[k + 1] - f[k])
             out.append((float(x0), bool(f[k + 1] > f[k])))
     return out
+
+
+def energy_barriers(model, dof: int, x_range, n: int = 4001):
+    """Energy to climb from each stable well of `dof` to the neighbouring saddle(s):
+    the integral of the restoring force from the well to the saddle (trapezoid on `n` points).
+
+    Returns a list of (well x, barrier) for the stable zeros in `x_range` that have a saddle
+    beside them (the lower of the two climbs when there are saddles on both sides)."""
+    xs = np.linspace(*x_range, n)
+    f = _grid_forces(model, dof, xs, np.zeros(1), "restoring")[:, 0]
+    energy = np.concatenate([[0.0], np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(xs))])
+    zeros = equilibria(model, dof, x_range, n)
+    e_at = lambda x: float(np.interp(x, xs, energy))  # noqa: E731
+    out = []
+    for k, (x, stable) in enumerate(zeros):
+        if not stable:
+            continue
+        climbs = [e_at(zeros[j][0]) - e_at(x) for j in (k - 1, k + 1)
+                  if 0 <= j < len(zeros) and not zeros[j][1]]
+        if climbs:
+            out.append((x, min(climbs)))
+    return out
