@@ -50,6 +50,12 @@ from .metrics._metrics import (
     energy_barriers as energy_barriers,
     restoring_error as restoring_error,
 )
+from .actuate._actuate import (
+    Actuation as Actuation,
+    ActuateRESULTS as ActuateRESULTS,
+    ActuateSettings as ActuateSettings,
+    actuate as actuate,
+)
 from .simulate._frequency import (
     resonance_frequencies as resonance_frequencies,
     resonance_peaks as resonance_peaks,
@@ -65,5 +71,10 @@ from .systems._kresling import (
 )
 from .systems._paper_cases import bistable_joint as bistable_joint, tristable_nes as tristable_nes
 from .systems._system import System as System, make_recordings as make_recordings
+from .discover._discover import DiscoveryReport as DiscoveryReport, discover as discover
+from .discover._catalogue import Term as Term, default_catalogue as default_catalogue
+from .discover._select import SelectionRule as SelectionRule
+from .refine._refine import RefineSettings as RefineSettings, refine as refine
+from .refine._shooting import output_error as output_error
 
 __version__ = "0.1.0"

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import gmr_jax as g
+from gmr_jax._reconstruct import low_order_terms
 from gmr_jax.metrics._metrics import damping_error, equilibria, restoring_error
 
 
@@ -67,3 +68,22 @@ def test_missing_derivatives_are_estimated(joint_data):
     bare = [g.Recording(t=r.t, x=r.x, base_acc=r.base_acc, name=r.name) for r in recs]
     res = g.reconstruct(bare, g.Library(5, 5))
     assert restoring_error(res.model, s.truth, 0, s.x_range[0]) < 0.03
+
+
+def test_keep_exempts_terms_from_the_threshold():
+    """A small but well-determined x v term: a large manual threshold removes it, `keep`
+    brings it back with the least-squares value (and a finite standard error)."""
+    rng = np.random.default_rng(0)
+    lib = g.Library(3, 1)
+    x = 0.01 * rng.standard_normal(4000)
+    v = rng.standard_normal(4000)
+    y = 200.0 * x + 0.5 * v + 20.0 * x * v + 1e-3 * rng.standard_normal(4000)
+    solver = g.STLS(threshold=20.0, alpha=0.0, normalize_columns=True)  # normalised: x 126, v 32, x v 13
+    i_xv = list(lib.terms()).index(("position_damping", 1))
+    plain = g.fit_local(x, v, y, lib, solver, None).value
+    assert float(plain.coef[i_xv]) == 0.0
+    keep = low_order_terms(lib)  # x^0, x^1, v, x v: what `reconstruct` exempts
+    assert keep.tolist() == [True, True, False, False, False, True, True]
+    kept = g.fit_local(x, v, y, lib, solver, None, keep=keep).value
+    assert abs(float(kept.coef[i_xv]) - 20.0) < 0.01
+    assert 0 < float(kept.covariance[i_xv, i_xv]) < 1e-5

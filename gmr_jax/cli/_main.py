@@ -158,6 +158,15 @@ def build_parser():
     b.add_argument("--chunk", type=_positive_int, default=512, help="trajectories per lockstep batch")
     b.add_argument("--out", required=True)
     b.set_defaults(fn=_cmd_basins)
+    from ._discover import add_parser as _add_discover
+
+    _add_discover(sub)
+    from ._actuate import add_parser as _add_actuate
+
+    _add_actuate(sub)
+    from ._refine import add_parser as _add_refine, run_refine as _run_refine
+
+    _add_refine(sub, _run_refine)
     return p
 
 

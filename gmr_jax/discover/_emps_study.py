@@ -627,3 +627,26 @@ def _main(argv=None):
 
 if __name__ == "__main__":
     _main()
+
+
+# -- the same study through the generic API ----------------------------------------------------
+
+
+def discover_emps(*, decimate: int = BENCHMARK_DECIMATION, n_boot: int = 200):
+    """The EMPS story with `gmr_jax.discover`: start from the mass + viscous model fitted to the
+    estimation run (Fv absorbs the friction), discover on the estimation run, measure the force
+    error on the validation (pulses) run. Returns (viscous-only GlobalModel, DiscoveryReport).
+
+    Same protocol as `prepare`: v, a by zero-phase Butterworth (100 Hz) and central differences
+    at 1 kHz, then the regression columns decimated in parallel (`decimate`)."""
+    from ..data._emps import load_emps
+    from ..model._model import from_terms
+    from ._discover import discover
+    from ._select import SelectionRule
+
+    visc = fit(prepare("estimation", decimate=decimate), MODELS["viscous"])
+    model = from_terms([visc["coef"][0]], [{"dof": 0, "physics": "velocity_damping", "order": 1,
+                                            "coefficient": float(visc["coef"][1])}])
+    rep = discover(model, [load_emps("estimation")], [load_emps("validation")], decimate=decimate,
+                   error="equation", rule=SelectionRule(n_boot=n_boot))
+    return model, rep

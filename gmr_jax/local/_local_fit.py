@@ -3,7 +3,7 @@
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float
 
 from .._solution import RESULTS, Solution, error_if_failed
 from ._library import Library
@@ -43,6 +43,7 @@ def fit_local(
     select: AutoThreshold | None = AutoThreshold(),
     *,
     weights: Float[Array, " samples"] | None = None,
+    keep: Bool[Array, " terms"] | None = None,
     throw: bool = True,
 ) -> Solution:
     """Fit the local model of one equilibrium (Algorithm 1, steps 1.1-1.4).
@@ -50,7 +51,9 @@ def fit_local(
     The equilibrium is the (weighted) mean of `x` (step 1.1), q = x - x_i (Eq. 2), Θ(q, v) the
     library (Eqs. 5-7), and y = Θ ξ is solved by STLS (Eq. 8), y being the force carried by
     the DOF: input force minus (H a) (Eq. 9). With `select`, the threshold is chosen by
-    cross-validation; otherwise `solver.threshold` is used.
+    cross-validation; otherwise `solver.threshold` is used. Terms flagged in `keep` are never
+    thresholded away: after STLS the model is refitted (least squares, no ridge) on the STLS
+    support plus `keep`.
 
     **Returns:** a `Solution` whose value is a `LocalFit`.
     """
@@ -66,6 +69,9 @@ def fit_local(
         cv = {}
     qr = compress(theta, y, weights)
     sol = stls_qr(qr, solver)
+    if keep is not None:
+        refit = eqx.tree_at(lambda s: (s.threshold, s.alpha), solver, (jnp.zeros(()), jnp.zeros(())))
+        sol = stls_qr(qr, refit, initial_mask=sol.stats["support"] | keep)
     cov = coefficient_covariance(qr, sol.value, sol.stats["support"])
     fit = LocalFit(
         equilibrium=xe,

@@ -1,0 +1,150 @@
+"""Concealed-physics scenarios: a truth with an effect the simulation model lacks.
+
+A scenario simulates the truth (a `GlobalModel`) under random-phase multisine inputs, records
+noisy signals at a given SNR (optionally displacement and inputs only), and calibrates the
+user's simulation model - the truth's terms without the effect - to the estimation recordings
+by equation-error least squares, so that the effect hides inside the calibrated coefficients
+(e.g. Coulomb friction inside viscous damping). Used by `benchmarks/discover_scenarios.py` and
+the tests.
+"""
+
+from dataclasses import dataclass, replace
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..model._model import from_terms
+from ..recordings._noise import add_noise
+from ..recordings._recording import Recording
+from ..simulate._inputs import Sampled
+from ..simulate._simulate import Integrator, simulate
+from ._catalogue import Term, basis
+from ._equation import dof_rows
+
+SIM = Integrator(rtol=1e-7, atol=1e-10, max_steps=400_000)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """`terms`: the simulation model's terms (gmr-model/1 dicts); `effect`: (Term, ratio, host)
+    with the effect sized so that its RMS force is `ratio` x the RMS force of the `host` term
+    (a Term of the model); None for a control. `excite`: "force" (multisine on the last mass)
+    or "base"."""
+
+    name: str
+    masses: tuple
+    topology: str
+    terms: tuple
+    effect: tuple | None
+    snr_db: float = 50.0
+    measured: str = "xva"  # or "x": displacement and inputs only
+    excite: str = "force"
+    amplitude: float = 1.0
+    band: tuple = (0.3, 6.0)
+    duration: float = 40.0
+    fs: float = 200.0
+    seed: int = 0
+    sign_eps: float = 1e-4
+
+
+def multisine(t, band, rms, seed):
+    """Random-phase multisine with flat amplitude over `band` (Hz), scaled to `rms`."""
+    rng = np.random.default_rng(seed)
+    T = t[-1] - t[0] + (t[1] - t[0])
+    f = np.arange(1, int(band[1] * T) + 1) / T
+    f = f[f >= band[0]]
+    ph = rng.uniform(0, 2 * np.pi, f.size)
+    s = np.sin(2 * np.pi * f[None, :] * t[:, None] + ph[None, :]).sum(1)
+    return rms * s / np.std(s)
+
+
+def _simulate_run(model, sc: Scenario, seed: int):
+    d = model.n_dof
+    t = np.arange(int(sc.duration * sc.fs)) / sc.fs
+    u = multisine(t, sc.band, sc.amplitude, seed)
+    ramp = np.clip(t / 2.0, 0, 1)  # 2 s fade-in
+    u = u * ramp
+    if sc.excite == "base":
+        b, f = u, np.zeros((t.size, d))
+    else:
+        b, f = np.zeros(t.size), np.zeros((t.size, d))
+        f[:, -1] = u
+    inp = Sampled(jnp.asarray(t), jnp.asarray(b), jnp.asarray(f), n_dof=d)
+    sol = simulate(model.with_sign_eps(sc.sign_eps), inp, jnp.asarray(t), jnp.zeros(d),
+                   integrator=SIM, throw=False)
+    x, v = (np.asarray(z) for z in sol.value)
+    if not np.all(np.isfinite(x)):
+        raise RuntimeError(f"{sc.name}: truth simulation failed")
+    m = model.with_sign_eps(sc.sign_eps)
+    xdd = np.asarray(jax.vmap(m.accelerations)(jnp.asarray(x), jnp.asarray(v), jnp.asarray(b),
+                                               jnp.asarray(f)))
+    a = np.asarray(model.absolute_accelerations(jnp.asarray(xdd), jnp.asarray(b)))
+    return t, x, v, a, b, f
+
+
+def record(sc: Scenario, model, seed: int, name: str) -> Recording:
+    """One noisy recording of `model` under the scenario's input (inputs noisy too)."""
+    t, x, v, a, b, f = _simulate_run(model, sc, seed)
+    rng = np.random.default_rng(seed + 1000)
+    sig = {"x": add_noise(x, sc.snr_db, rng)}
+    if sc.measured == "xva":
+        sig["v"] = add_noise(v, sc.snr_db, rng)
+        sig["a"] = add_noise(a, sc.snr_db, rng)
+    if sc.excite == "base":
+        sig["base_acc"] = add_noise(b, sc.snr_db, rng)
+    else:
+        fn = f.copy()
+        fn[:, -1] = add_noise(f[:, -1], sc.snr_db, rng)
+        sig["force"] = fn
+    return Recording(t=t, masses=np.asarray(sc.masses, float), name=name, **sig)
+
+
+def effect_coefficient(sc: Scenario, base_model) -> float:
+    """Size the effect: RMS of its force = ratio x RMS of the host term's force (pilot run of the
+    model without the effect)."""
+    term, ratio, host = sc.effect
+    _, x, v, *_ = _simulate_run(base_model, sc, sc.seed + 77)
+    c_host = [t["coefficient"] for t in sc.terms if t["dof"] == host.dof and t["physics"] == host.family
+              and t["order"] == host.order][0]
+    host_f = c_host * basis(host, x[:, host.dof], v[:, host.dof])
+    eff = basis(term, x[:, term.dof], v[:, term.dof])
+    sgn = np.sign(c_host) if term.family == host.family else 1.0
+    return float(sgn * ratio * np.std(host_f) / np.sqrt(np.mean(eff**2)))
+
+
+def calibrate(terms, masses, topology, recs, form: str) -> "object":
+    """Least-squares equation-error calibration of the model structure `terms` (their
+    coefficients are refitted; masses kept) on the recordings (completed)."""
+    zero = from_terms(masses, [dict(t, coefficient=0.0) for t in terms], topology)
+    d = len(masses)
+    out = []
+    for i in range(d):
+        ts = [Term(i, t["physics"], t["order"]) for t in terms if t["dof"] == i]
+        rows = [dof_rows(r, zero, i, ts, form=form) for r in recs]
+        X = np.concatenate([r.columns for r in rows])
+        y = np.concatenate([r.y for r in rows])
+        c, *_ = np.linalg.lstsq(X, y, rcond=None)
+        out += [tm.model_term(ci) for tm, ci in zip(ts, c)]
+    return from_terms(masses, out, topology)
+
+
+def build(sc: Scenario, n_estimation: int = 2, n_holdout: int = 1):
+    """(truth model, calibrated simulation model, estimation recordings, holdout recordings,
+    true effect coefficient or None)."""
+    base = from_terms(sc.masses, list(sc.terms), sc.topology)
+    truth, c_eff = base, None
+    if sc.effect is not None:
+        c_eff = effect_coefficient(sc, base)
+        term = sc.effect[0]
+        truth = from_terms(sc.masses, list(sc.terms) + [term.model_term(c_eff)], sc.topology)
+    est = [record(sc, truth, sc.seed + 10 * k, f"{sc.name}_est{k}") for k in range(n_estimation)]
+    hold = [record(sc, truth, sc.seed + 500 + 10 * k, f"{sc.name}_hold{k}") for k in range(n_holdout)]
+    form = "weak" if sc.measured == "x" else "strong"
+    done = [r.complete(sc.topology) for r in est]
+    model = calibrate(list(sc.terms), sc.masses, sc.topology, done, form)
+    return truth, model, est, hold, c_eff
+
+
+def with_noise(sc: Scenario, snr_db: float) -> Scenario:
+    return replace(sc, snr_db=snr_db)

@@ -1,0 +1,165 @@
+"""gmr discover: locate, name, model and show the physics a calibrated model left out."""
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gmr_jax
+from gmr_jax.cli._main import main
+from gmr_jax.discover._equation import dof_rows
+from gmr_jax.discover._scenarios import Scenario, build
+from gmr_jax.discover._select import SelectionRule, cv_sse, rss
+
+K = (2 * np.pi * 2.0) ** 2
+C = 2 * 0.05 * np.sqrt(K)
+TERMS = ({"dof": 0, "physics": "stiffness", "order": 1, "coefficient": K},
+         {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": C})
+RULE = SelectionRule(n_boot=100)
+
+
+def _scenario(effect, **kw):
+    return Scenario("t", (1.0,), "independent", TERMS, effect, amplitude=20.0, duration=20.0, **kw)
+
+
+@pytest.fixture(scope="module")
+def coulomb():
+    eff = (gmr_jax.Term(0, "velocity_damping", 0), 0.15, gmr_jax.Term(0, "velocity_damping", 1))
+    truth, model, est, hold, c_true = build(_scenario(eff, snr_db=50.0))
+    return model, est, hold, c_true, gmr_jax.discover(model, est, hold, rule=RULE)
+
+
+def test_concealed_coulomb_found(coulomb):
+    model, est, hold, c_true, rep = coulomb
+    # the calibrated model absorbed the friction into its viscous coefficient
+    assert float(model.velocity_damping[0, 1]) > 1.05 * C
+    assert [(f["dof"], f["physics"]) for f in rep.findings] == [(0, "coulomb_friction")]
+    f = rep.findings[0]
+    assert abs(f["coefficient"] - c_true) < 0.2 * c_true
+    assert f["ci95"][0] < f["coefficient"] < f["ci95"][1]
+    assert 0.3 < f["explained_fraction"] <= 1.0
+    assert "small" in f["where"]
+    assert rep.before["kind"] == "output"
+    assert rep.after["nrmse"] < 0.5 * rep.before["nrmse"]
+    # the viscous coefficient moves back to the truth
+    visc = [c for c in rep.corrections if c["physics"] == "viscous_damping"][0]
+    assert abs(visc["model_value"] + visc["coefficient"] - C) < 0.1 * C
+    assert "Coulomb" in rep.summary()
+
+
+def test_control_nothing_missing():
+    _, model, est, hold, _ = build(_scenario(None, snr_db=40.0, measured="x"))
+    rep = gmr_jax.discover(model, est, hold, rule=RULE)
+    assert rep.findings == []
+    assert rep.settings["form"] == "weak"  # a was estimated: no acceleration used
+    assert "Nothing missing" in rep.summary()
+    assert rep.after["nrmse"] == pytest.approx(rep.before["nrmse"], rel=0.05)
+
+
+def test_report_json_contract(coulomb):
+    *_, rep = coulomb
+    d = json.loads(json.dumps(rep.to_dict("aug.json")))
+    assert {"findings", "before", "after", "model"} <= set(d)
+    assert d["model"] == "aug.json" and isinstance(d["before"]["nrmse"], float)
+    for f in d["findings"]:
+        assert {"dof", "physics", "coefficient", "ci95", "explained_fraction", "where"} <= set(f)
+        assert len(f["ci95"]) == 2
+    loc = rep.location[0]["before"]
+    assert np.array(loc["map"]["mean"], float).shape == (12, 12)
+    assert {"autocorrelation", "input", "input_squared", "velocity"} <= set(loc["tests"])
+
+
+def test_weak_form_is_exact_without_noise():
+    """Noise-free x only: the weak-form residual of the truth vanishes, that of a wrong model not."""
+    sc = _scenario(None, snr_db=300.0, measured="x")
+    truth, _, est, _, _ = build(sc, n_estimation=1, n_holdout=0)
+    rec = est[0].complete("independent")
+    r = dof_rows(rec, truth, 0, [], form="weak")
+    assert np.linalg.norm(r.y) < 3e-3 * np.sqrt(r.scale)  # SG v and quadrature only
+    wrong = gmr_jax.from_terms([1.0], [dict(TERMS[0], coefficient=1.1 * K), TERMS[1]])
+    assert np.linalg.norm(dof_rows(rec, wrong, 0, [], form="weak").y) > 3e-2 * np.sqrt(r.scale)
+
+
+def test_selection_kernels_jit_vmap_grad():
+    rng = np.random.default_rng(0)
+    X = rng.standard_normal((300, 4))
+    y = X[:, :2] @ np.array([1.0, -2.0]) + 0.1 * rng.standard_normal(300)
+    G, b, yy = jnp.asarray(X.T @ X), jnp.asarray(X.T @ y), float(y @ y)
+    mask = jnp.array([True, True, False, True])
+    c, *_ = np.linalg.lstsq(X[:, [0, 1, 3]], y, rcond=None)
+    ref = np.sum((y - X[:, [0, 1, 3]] @ c) ** 2)
+    assert float(rss(G, b, yy, mask)) == pytest.approx(ref, rel=1e-8)
+    # blocked CV: vmapped over masks equals one call per mask
+    Gf = jnp.stack([jnp.asarray(X[k::3].T @ X[k::3]) for k in range(3)])
+    bf = jnp.stack([jnp.asarray(X[k::3].T @ y[k::3]) for k in range(3)])
+    yyf = jnp.asarray([y[k::3] @ y[k::3] for k in range(3)])
+    masks = jnp.array([[True, False, False, False], [True, True, False, False]])
+    many = jax.vmap(cv_sse, in_axes=(None, None, None, 0))(Gf, bf, yyf, masks)
+    assert np.allclose(many, [cv_sse(Gf, bf, yyf, m) for m in masks])
+    assert many[1] < 0.1 * many[0]
+    # gradient of the RSS w.r.t. the target against finite differences
+    g = jax.grad(lambda bb: rss(G, bb, yy, mask))(b)
+    e = jnp.zeros(4).at[0].set(1e-6)
+    fd = (rss(G, b + e, yy, mask) - rss(G, b - e, yy, mask)) / 2e-6
+    assert float(g[0]) == pytest.approx(float(fd), rel=1e-5)
+
+
+def test_cli_discover(tmp_path, capsys):
+    rng = np.random.default_rng(1)
+    # tiny hand-made model (m = 1, k = 100, c = 1) and recordings of a truth with Coulomb 0.5 N
+    t = np.arange(4000) * 0.005
+    model = {"format": "gmr-model/1", "topology": "independent", "masses": [1.0],
+             "terms": [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": 100.0},
+                       {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 1.3}]}
+    (tmp_path / "m.json").write_text(json.dumps(model))
+    for name, seed in (("e", 0), ("h", 1)):
+        u = np.sin(2 * np.pi * (0.5 + 0.2 * seed) * t) * 20 + np.sin(2 * np.pi * 2.3 * t) * 10
+        x = np.zeros(t.size)
+        v = np.zeros(t.size)
+        a = np.zeros(t.size)
+        for k in range(1, t.size):  # semi-implicit Euler on a fine sub-grid
+            xx, vv = x[k - 1], v[k - 1]
+            for _ in range(20):
+                acc = u[k - 1] - 100 * xx - 1.0 * vv - 0.5 * np.tanh(vv / 1e-3)
+                vv += acc * 0.005 / 20
+                xx += vv * 0.005 / 20
+            x[k], v[k] = xx, vv
+        a = u - 100 * x - v - 0.5 * np.tanh(v / 1e-3)
+        noisy = {k: s + 1e-3 * np.std(s) * rng.standard_normal(s.shape)
+                 for k, s in {"x": x, "v": v, "a": a}.items()}
+        np.savez(tmp_path / f"{name}.npz", t=t, x=noisy["x"][:, None], v=noisy["v"][:, None],
+                 a=noisy["a"][:, None], force=u[:, None])
+    out = tmp_path / "out"
+    rc = main(["discover", str(tmp_path / "m.json"), str(tmp_path / "e.npz"), "--holdout",
+               str(tmp_path / "h.npz"), "--out", str(out), "--n-boot", "50"])
+    assert rc == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert [f["physics"] for f in rep["findings"]] == ["coulomb_friction"]
+    assert abs(rep["findings"][0]["coefficient"] - 0.5) < 0.1
+    assert rep["model"] == "augmented_model.json"
+    aug = gmr_jax.load_model(out / "augmented_model.json")
+    assert float(aug.velocity_damping[0, 0]) == pytest.approx(rep["findings"][0]["coefficient"])
+    for fig in ("residual_map.png", "residual_time_frequency.png", "holdout_before_after.png"):
+        assert (out / fig).exists()
+    assert "Coulomb" in capsys.readouterr().out
+    (tmp_path / "bad.npz").write_text("not an npz")
+    rc = main(["discover", str(tmp_path / "m.json"), str(tmp_path / "bad.npz"), "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and err.count("\n") == 0 and "bad.npz" in err
+
+
+def test_emps_through_discover():
+    from gmr_jax.discover._emps_study import discover_emps
+
+    model, rep = discover_emps(n_boot=100)
+    assert float(model.velocity_damping[0, 1]) > 350  # Fv absorbed the friction
+    phys = [f["physics"] for f in rep.findings]
+    assert phys[0] == "coulomb_friction" and set(phys) <= {"coulomb_friction", "preload"}
+    fc = rep.findings[0]["coefficient"]
+    assert abs(fc - 20.3935) < 0.05 * 20.3935
+    fv = float(rep.model.velocity_damping[0, 1])
+    assert abs(fv - 203.5034) < 0.1 * 203.5034
+    assert rep.before["kind"] == "equation" and rep.before["nrmse"] > 0.15
+    assert rep.after["nrmse"] < 0.08

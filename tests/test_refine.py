@@ -1,0 +1,194 @@
+import dataclasses
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+import pytest
+
+import gmr_jax as g
+from gmr_jax.refine import RefineSettings, free_mask, output_error, refine, shooting_problem
+
+
+def chain2():
+    """A 2-cell polynomial chain (hardening cells, viscous + cubic damping): a truth that is a
+    GlobalModel, so recovered coefficients can be compared with it."""
+    return g.GlobalModel(
+        masses=jnp.array([0.05, 0.04]),
+        stiffness=jnp.array([[0.0, 40.0, 0.0, 4.0e4], [0.0, 60.0, 0.0, 2.0e4]]),
+        velocity_damping=jnp.array([[0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0]]),
+        position_damping=jnp.array([[0.08, 0.0, 0.0], [0.05, 0.0, 0.0]]),
+        topology="chain",
+    )
+
+
+def sweep_recording(model, amplitude, duration=2.0, fs=200.0, f=(1.0, 8.0), x0=None, name="rec"):
+    ts = jnp.arange(int(duration * fs) + 1) / fs
+    exc = g.BaseChirp(jnp.asarray(amplitude), f[0], f[1], duration, n_dof=model.n_dof)
+    x0 = jnp.zeros(model.n_dof) if x0 is None else jnp.asarray(x0)
+    xs, vs = g.simulate(model, exc, ts, x0).value
+    base = jax.vmap(lambda t: exc(t)[0])(ts)
+    return g.Recording(t=np.asarray(ts), x=np.asarray(xs), v=np.asarray(vs), base_acc=np.asarray(base), name=name)
+
+
+#: one settings object shared by the chain tests, so they reuse one compiled solve
+SETTINGS = RefineSettings(window=0.5, stride=4)
+
+
+def perturb(model, factors):
+    return dataclasses.replace(
+        model,
+        stiffness=model.stiffness * factors[0],
+        position_damping=model.position_damping * factors[1],
+    )
+
+
+def coef_error(model, truth):
+    """Relative error of the truth's nonzero coefficients."""
+    errs = []
+    for p in ("stiffness", "position_damping"):
+        a, b = np.asarray(getattr(model, p)), np.asarray(getattr(truth, p))
+        nz = b != 0
+        errs.append(np.abs(a[nz] - b[nz]) / np.abs(b[nz]))
+    return np.concatenate(errs)
+
+
+@pytest.fixture(scope="module")
+def chain_data():
+    truth = chain2()
+    train = [sweep_recording(truth, 6e-3, name="train")]  # x up to 3 cm: the cubic terms matter
+    hold = [sweep_recording(truth, 8e-3, f=(2.0, 6.0), x0=[0.005, -0.003], name="hold")]
+    return truth, train, hold
+
+
+def test_gradient_matches_central_differences():
+    s = g.bistable_joint("position_independent")
+    xe = float(s.equilibria[1, 0])
+    rec = sweep_recording(s.truth, np.deg2rad(2.0), duration=0.5, fs=250.0, f=(5.0, 15.0), x0=[xe])
+    m = dataclasses.replace(s.truth, stiffness=s.truth.stiffness * jnp.array([[1.0, 1.15, 1.0, 0.85]]))
+    st = RefineSettings(window=0.25, stride=2, integrator=g.Integrator(rtol=1e-11, atol=1e-13, max_steps=20_000))
+    prob, p0, wins = shooting_problem(m, [rec], None, st)
+    assert p0.shape == (3,)
+
+    @eqx.filter_jit
+    def obj(p):
+        return 0.5 * jnp.sum(prob.residuals(p, wins)[0] ** 2)
+
+    grad = np.asarray(eqx.filter_jit(jax.grad(obj))(p0))
+    h = 1e-6
+    fd = np.array([(float(obj(p0.at[i].add(h))) - float(obj(p0.at[i].add(-h)))) / (2 * h) for i in range(3)])
+    np.testing.assert_allclose(grad, fd, rtol=1e-4)
+    # the Jacobian optimistix uses (forward mode) agrees with the checkpointed-adjoint gradient ...
+    r, jac = eqx.filter_jit(lambda p: prob.residuals_and_jacobian(p, wins))(p0)
+    np.testing.assert_allclose(np.asarray(jac.T @ r), grad, rtol=1e-8)
+
+
+def test_refine_recovers_perturbed_chain(chain_data):
+    truth, train, hold = chain_data
+    start = perturb(truth, (jnp.array([[1, 1.25, 1, 0.8], [1, 0.85, 1, 1.3]]), jnp.array([[1.3, 1, 1], [0.8, 1, 1]])))
+    sol = refine(start, train, settings=SETTINGS, holdout=hold)
+    assert sol.result == g.RESULTS.successful
+    st = sol.stats
+    before, after = st["holdout"]["before"].nrmse, st["holdout"]["after"].nrmse
+    assert after * 3 <= before, (before, after)
+    assert st["train"]["after"].nrmse < st["train"]["before"].nrmse
+    e0, e1 = coef_error(start, truth), coef_error(sol.value, truth)
+    assert np.all(e1 < e0) and e1.max() < 0.02, (e0, e1)
+    assert sol.value.sign_eps == 0.0 and sol.value.stderr is None
+    assert st["iterations"] >= 1 and st["failed_windows_after"] == 0
+
+
+def test_subset_refinement_keeps_fixed_coefficients(chain_data):
+    truth, train, _ = chain_data
+    start = perturb(truth, (jnp.array([[1, 1.2, 1, 1], [1, 1, 1, 1]]), jnp.array([[1.5, 1, 1], [1.5, 1, 1]])))
+    sol = refine(start, train, free=[(0, "stiffness", 1)], settings=SETTINGS)
+    k = np.asarray(sol.value.stiffness)
+    np.testing.assert_array_equal(np.delete(k.ravel(), 1), np.delete(np.asarray(start.stiffness).ravel(), 1))
+    np.testing.assert_array_equal(np.asarray(sol.value.position_damping), np.asarray(start.position_damping))
+    assert k[0, 1] != float(start.stiffness[0, 1])  # the free one moved
+    assert sol.stats["free"] == [(0, "stiffness", 1)]
+    mask = free_mask(start, "damping")
+    assert mask["position_damping"][:, 0].all() and not mask["stiffness"].any()
+
+
+def test_coulomb_term_uses_smooth_surrogate_then_exact_model():
+    m = g.GlobalModel(masses=jnp.array([1.0]), stiffness=jnp.array([[0.0, 400.0]]),
+                      velocity_damping=jnp.array([[0.02, 0.0]]), position_damping=jnp.array([[0.5]]))
+    # the truth with the exact sgn(v) (no stick-slip: the base force stays well above 0.02)
+    rec = sweep_recording(m, 5e-3, duration=1.0, fs=400.0, f=(2.0, 6.0))
+    start = dataclasses.replace(m, velocity_damping=m.velocity_damping * 1.25, stiffness=m.stiffness * 1.1)
+    prob, _, _ = shooting_problem(start, [rec], None, RefineSettings(window=0.25))
+    assert prob.model.sign_eps > 0  # the optimised model is smoothed ...
+    sol = refine(start, [rec], settings=RefineSettings(window=0.25, stride=4, max_steps=30), throw=False)
+    assert sol.value.sign_eps == 0.0  # ... the returned one is exact
+    exact = output_error(sol.value, [rec], 0.25)
+    assert exact.nrmse == pytest.approx(sol.stats["train"]["after"].nrmse)
+    assert exact.nrmse < sol.stats["train"]["before"].nrmse / 3
+    assert abs(float(sol.value.stiffness[0, 1]) - 400.0) < abs(float(start.stiffness[0, 1]) - 400.0)
+
+
+def test_bad_inputs(chain_data):
+    truth, train, _ = chain_data
+    one_dof = g.bistable_joint().truth
+    with pytest.raises(g.GMRInputError, match="2 DOF column"):
+        refine(one_dof, train)
+    x = train[0].x.copy()
+    x[10, 1] = np.nan
+    with pytest.raises(g.GMRInputError, match="NaN"):
+        refine(truth, [dataclasses.replace(train[0], x=x)])
+    with pytest.raises(g.GMRInputError, match="unknown"):
+        refine(truth, train, free="springs")
+    with pytest.raises(g.GMRInputError, match="longer than recording"):
+        refine(truth, train, settings=RefineSettings(window=100.0))
+    with pytest.raises(g.GMRInputError, match="selects no coefficient"):
+        refine(truth, train, free="velocity_damping")
+
+
+def test_diverging_start_gives_result_code(chain_data):
+    truth, train, _ = chain_data
+    # softening cubic with a huge coefficient: windows leave the data range
+    bad = dataclasses.replace(truth, stiffness=truth.stiffness.at[:, 3].set(-5e7))
+    sol = refine(bad, train, settings=SETTINGS, throw=False)
+    assert sol.result != g.RESULTS.successful
+    assert sol.stats["failed_windows_after"] > 0
+    assert np.isinf(sol.stats["train"]["after"].nrmse)
+    with pytest.raises(Exception):
+        refine(bad, train, settings=SETTINGS)
+
+
+@pytest.mark.slow
+def test_gauss_newton_solver(chain_data):
+    truth, train, _ = chain_data
+    start = perturb(truth, (jnp.array([[1, 1.1, 1, 1], [1, 1, 1, 1]]), jnp.ones((2, 3))))
+    sol = refine(start, train, free="stiffness",
+                 settings=RefineSettings(window=0.5, stride=4, solver=optx.GaussNewton(rtol=1e-6, atol=1e-8)))
+    assert sol.result == g.RESULTS.successful
+    np.testing.assert_allclose(np.asarray(sol.value.stiffness), np.asarray(truth.stiffness), rtol=1e-2, atol=1e-6)
+
+
+def test_cli_refine(chain_data, tmp_path, capsys):
+    from gmr_jax.cli._main import main
+
+    truth, train, hold = chain_data
+    start = perturb(truth, (jnp.array([[1, 1.2, 1, 1], [1, 1, 1, 0.8]]), jnp.ones((2, 3))))
+    g.save_model(start, tmp_path / "start.json")
+    rec_paths = []
+    for r in (*train, *hold):
+        p = tmp_path / f"{r.name}.npz"
+        g.save_recording(r, p)
+        rec_paths.append(str(p))
+    out = tmp_path / "refined.json"
+    code = main(["refine", str(tmp_path / "start.json"), rec_paths[0], "--holdout", rec_paths[1], "--out", str(out),
+                 "--free", "stiffness", "--window", "0.5", "--stride", "4", "--max-steps", "50"])
+    printed = capsys.readouterr().out
+    assert code == 0, printed
+    refined = g.load_model(out)
+    np.testing.assert_allclose(np.asarray(refined.stiffness), np.asarray(truth.stiffness), rtol=0.02, atol=1e-9)
+    np.testing.assert_array_equal(np.asarray(refined.position_damping)[:, 0], np.asarray(start.position_damping)[:, 0])
+    assert "holdout NRMSE" in printed
+    # user errors: one line, exit status 2
+    assert main(["refine", str(tmp_path / "start.json"), rec_paths[0], "--out", str(out), "--free", "springs"]) == 2
+    assert main(["refine", str(tmp_path / "start.json"), rec_paths[0], "--out", str(out), "--window", "99"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 2 and "longer than recording" in err
