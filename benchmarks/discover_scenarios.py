@@ -6,12 +6,20 @@ so the effect hides inside its coefficients. `discover` gets the calibrated mode
 estimation recordings and one holdout recording (different multisine phases). Controls: the
 model has every term of the truth. Writes benchmarks/results_discover.md.
 
-    python benchmarks/discover_scenarios.py [--only NAME ...]
+Two holdout measures per scenario: the output NRMSE against the *noisy* holdout record (what a
+user can measure; bounded below by the noise floor, the truth model's own score) and the model
+error proper against the *noise-free* truth response to the noise-free holdout input (known in a
+synthetic benchmark; the truth scores 0). The ">= 2x" criterion uses the model error.
+`--seeds N` repeats every scenario with N noise draws (same inputs and truth; draw 0 is the
+default run) and tallies over all of them.
+
+    python benchmarks/discover_scenarios.py [--only NAME ...] [--seeds N]
 """
 
 import argparse
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +27,7 @@ import numpy as np
 import gmr_jax
 from gmr_jax.discover._catalogue import Term
 from gmr_jax.discover._discover import holdout_errors
-from gmr_jax.discover._scenarios import Scenario, build
+from gmr_jax.discover._scenarios import Scenario, build_full, model_error
 
 S, V, P = "stiffness", "velocity_damping", "position_damping"
 K = (2 * np.pi * 2.0) ** 2
@@ -70,7 +78,7 @@ CONTROLS = [
 
 def run_one(sc: Scenario):
     t0 = time.time()
-    truth, model, est, hold, c_true = build(sc)
+    truth, model, est, hold, c_true, _, hold_clean = build_full(sc)
     rep = gmr_jax.discover(model, est, hold)
     hc = [r.complete(sc.topology) for r in hold]
     floor = holdout_errors(truth, hc, rep.settings, rep.before["kind"])
@@ -78,7 +86,11 @@ def run_one(sc: Scenario):
     found = [(f["dof"], f["physics"] + (f"_{f['order']}" if "order" in f else "")) for f in rep.findings]
     row = {"name": sc.name, "found": found, "before": rep.before["nrmse"], "after": rep.after["nrmse"],
            "kind": rep.before["kind"], "truth_floor": floor, "seconds": time.time() - t0,
-           "form": rep.settings["form"], "summary": rep.summary()}
+           "form": rep.settings["form"], "summary": rep.summary(), "seed": sc.noise_seed,
+           # model error proper: simulated vs noise-free truth response on the holdout input
+           "me_before": model_error(model, hold_clean, sc), "me_after": model_error(rep.model, hold_clean, sc),
+           "me_truth": model_error(truth, hold_clean, sc)}
+    row["seconds"] = time.time() - t0
     if sc.effect is not None:
         term = sc.effect[0]
         name = term.physics + (f"_{term.order}" if term.family == P else "")
@@ -94,53 +106,102 @@ def run_one(sc: Scenario):
     return row
 
 
+def _ratio(a, b):
+    return a / b if b > 0 else float("inf")
+
+
+def _tally(rows):
+    eff = [r for r in rows if "expected" in r]
+    ctl = [r for r in rows if "expected" not in r]
+    return {"n": len(eff), "right": sum(r["right"] for r in eff),
+            "coef": sum(r.get("coef_err", 1.0) <= 0.2 for r in eff),
+            "me2x": sum(r["me_before"] >= 2 * r["me_after"] for r in eff),
+            "noisy2x": sum(r["before"] >= 2 * r["after"] for r in eff),
+            "floor": sum(r["after"] <= 1.1 * r["truth_floor"] for r in eff),
+            "nc": len(ctl), "ctl": sum(r["right"] for r in ctl)}
+
+
+def _tally_line(tl):
+    return (f"right physics on the right cell (and nothing else): {tl['right']}/{tl['n']}; coefficient within "
+            f"20 %: {tl['coef']}/{tl['n']}; **holdout model error (vs the noise-free truth response) better by "
+            f">= 2x: {tl['me2x']}/{tl['n']}**; holdout NRMSE vs the noisy record better by >= 2x: "
+            f"{tl['noisy2x']}/{tl['n']} (bounded by the noise floor); noisy-record NRMSE after within 10 % of "
+            f"the noise floor: {tl['floor']}/{tl['n']}; controls with no finding: {tl['ctl']}/{tl['nc']}.")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--only", nargs="*", default=None)
+    ap.add_argument("--seeds", type=int, default=1, help="noise draws per scenario (draw 0 = default run)")
     ap.add_argument("--out", default=str(Path(__file__).with_name("results_discover.md")))
     args = ap.parse_args(argv)
     rows = []
+    t_start = time.time()
     for sc in SCENARIOS + CONTROLS:
         if args.only and sc.name not in args.only:
             continue
-        r = run_one(sc)
-        rows.append(r)
-        print(f"{r['name']:45s} right={r['right']} found={r['found']} coef_err={r.get('coef_err', float('nan')):.3f} "
-              f"{r['kind']} {100 * r['before']:.2f}% -> {100 * r['after']:.2f}% (truth {100 * r['truth_floor']:.2f}%) "
-              f"{r['seconds']:.0f}s", flush=True)
-    eff = [r for r in rows if "expected" in r]
-    ctl = [r for r in rows if "expected" not in r]
+        for k in range(args.seeds):
+            r = run_one(replace(sc, noise_seed=k))
+            rows.append(r)
+            print(f"{r['name']:45s} seed={k} right={r['right']} found={r['found']} "
+                  f"coef_err={r.get('coef_err', float('nan')):.3f} {r['kind']} noisy {100 * r['before']:.2f}% -> "
+                  f"{100 * r['after']:.2f}% (truth {100 * r['truth_floor']:.2f}%) model error "
+                  f"{100 * r['me_before']:.3f}% -> {100 * r['me_after']:.3f}% (truth {100 * r['me_truth']:.1e}%) "
+                  f"{r['seconds']:.0f}s", flush=True)
+    cmd = "python benchmarks/discover_scenarios.py" + (f" --seeds {args.seeds}" if args.seeds > 1 else "") + (
+        " --only " + " ".join(args.only) if args.only else "")
     lines = ["# gmr discover: concealed-physics benchmark", "",
-             "Command: `python benchmarks/discover_scenarios.py` (2 estimation + 1 holdout recordings per "
+             f"Command: `{cmd}` ({(time.time() - t_start) / 60:.1f} min on 2 shared cores; 2 estimation + 1 "
+             "holdout recordings per "
              "scenario, 40 s at 200 Hz, random-phase multisine 0.3-6 Hz; the simulation model is the truth "
              "without the effect, calibrated by equation-error least squares on the estimation recordings; "
              "effect size = RMS of its force / RMS of the host term's force). `xva`: x, v, a and inputs "
              "recorded; `x`: displacement and inputs only (v by Savitzky-Golay, weak form, no acceleration). "
-             "Holdout NRMSE: output (simulation) error ||x_sim - x|| / ||x - mean||, measured against the "
-             "noisy holdout x; 'truth' is the truth model's own holdout NRMSE (the noise floor).", "",
-             "| scenario | expected (cell, physics) | found | right | coef true | coef found (95 % CI) | error | "
-             "holdout NRMSE before -> after | ratio | truth | time |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             + (f"Each scenario is run with {args.seeds} noise draws (column 'noise'; same inputs and truth, "
+                "new measurement noise, so a new calibrated model too; draw 0 is the default run). "
+                if args.seeds > 1 else "") , "",
+             "Two holdout measures, both reported:", "",
+             "- **NRMSE vs the noisy record** (what a user can measure): output (simulation) error "
+             "||x_sim - x_meas|| / ||x_meas - mean|| of the model simulated by `discover` under the recorded "
+             "(noisy, low-passed) holdout inputs from the recorded initial state, against the noisy holdout x. "
+             "'noise floor' is the truth model's own score on this measure: no model can go below it, so at "
+             "40 dB a given model that is already within ~1.5 % cannot improve 2x on it.",
+             "- **Model error vs the noise-free truth** (known only in a synthetic benchmark): "
+             "||x_sim - x_true|| / ||x_true - mean|| of the model simulated under the noise-free holdout input "
+             "from rest (the truth's initial state, same sign smoothing), against the truth's noise-free "
+             "response; the truth model scores 0 on it (checked in every run).", "",
+             "The \">= 2x better\" criterion uses the **model error**: it is the fair test of whether the fit "
+             "improved, the noisy-record NRMSE being bounded below by the noise floor (its ratio cannot exceed "
+             "before / floor). The noisy-record ratio is reported too, with the floor, and so is whether the "
+             "augmented model reaches the floor (after <= 1.1 x floor).", "",
+             "| scenario | noise | expected (cell, physics) | found | right | coef true | coef found (95 % CI) | "
+             "error | NRMSE vs noisy record before -> after | ratio | noise floor (truth) | model error vs "
+             "noise-free truth before -> after | ratio | time |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         ci = r.get("ci95")
         cf = (f"{r['c_found']:.4g} ({ci[0]:.4g}, {ci[1]:.4g})" if ci else "-") if "expected" in r else "-"
         lines.append(
-            f"| {r['name']} | {r.get('expected', 'none (control)')} | {r['found'] or 'none'} | "
+            f"| {r['name']} | {r['seed']} | {r.get('expected', 'none (control)')} | {r['found'] or 'none'} | "
             f"{'yes' if r['right'] else 'NO'} | {r.get('c_true', float('nan')):.4g} | {cf} | "
             f"{100 * r.get('coef_err', float('nan')):.1f} % | {100 * r['before']:.2f} % -> "
-            f"{100 * r['after']:.2f} % ({r['kind']}) | {r['before'] / r['after']:.1f}x | "
-            f"{100 * r['truth_floor']:.2f} % | {r['seconds']:.0f} s |")
-    n_right = sum(r["right"] for r in eff)
-    n_coef = sum(r.get("coef_err", 1.0) <= 0.2 for r in eff)
-    n_2x = sum(r["before"] >= 2 * r["after"] for r in eff)
-    lines += ["", f"Right physics on the right cell (and nothing else): {n_right}/{len(eff)}; "
-              f"coefficient within 20 %: {n_coef}/{len(eff)}; holdout NRMSE better by >= 2x: {n_2x}/{len(eff)}; "
-              f"controls with no finding: {sum(r['right'] for r in ctl)}/{len(ctl)}.", "",
-              "## Summaries", ""]
+            f"{100 * r['after']:.2f} % ({r['kind']}) | {_ratio(r['before'], r['after']):.1f}x | "
+            f"{100 * r['truth_floor']:.2f} % | {100 * r['me_before']:.3f} % -> {100 * r['me_after']:.3f} % | "
+            f"{_ratio(r['me_before'], r['me_after']):.1f}x | {r['seconds']:.0f} s |")
+    worst = max((r["me_truth"] for r in rows), default=0.0)
+    lines += ["", f"Check: the truth model's own model error is <= {100 * worst:.1e} % in every row.", ""]
+    if args.seeds > 1:
+        lines += [f"Noise draw 0 (the default run): {_tally_line(_tally([r for r in rows if r['seed'] == 0]))}", "",
+                  f"All {args.seeds} noise draws ({len(rows)} runs): {_tally_line(_tally(rows))}", ""]
+    else:
+        lines += [_tally_line(_tally(rows))[0].upper() + _tally_line(_tally(rows))[1:], ""]
+    tally_at = len(lines) - 2
+    lines += ["## Summaries" + (" (noise draw 0)" if args.seeds > 1 else ""), ""]
     for r in rows:
-        lines += [f"**{r['name']}**", "", "```", r["summary"], "```", ""]
+        if r["seed"] == 0:
+            lines += [f"**{r['name']}**", "", "```", r["summary"], "```", ""]
     Path(args.out).write_text("\n".join(lines))
-    print(lines[-len(rows) * 5 - 3] if rows else "")
+    print("\n".join(lines[tally_at - (2 if args.seeds > 1 else 0): tally_at + 1]))
     return 0
 
 

@@ -1,6 +1,7 @@
 """gmr discover: locate, name, model and show the physics a calibrated model left out."""
 
 import json
+from dataclasses import replace
 
 import jax
 import jax.numpy as jnp
@@ -10,7 +11,7 @@ import pytest
 import gmr_jax
 from gmr_jax.cli._main import main
 from gmr_jax.discover._equation import dof_rows
-from gmr_jax.discover._scenarios import Scenario, build
+from gmr_jax.discover._scenarios import Scenario, build, build_full, model_error
 from gmr_jax.discover._select import SelectionRule, cv_sse, rss
 
 K = (2 * np.pi * 2.0) ** 2
@@ -27,8 +28,12 @@ def _scenario(effect, **kw):
 @pytest.fixture(scope="module")
 def coulomb():
     eff = (gmr_jax.Term(0, "velocity_damping", 0), 0.15, gmr_jax.Term(0, "velocity_damping", 1))
-    truth, model, est, hold, c_true = build(_scenario(eff, snr_db=50.0))
-    return model, est, hold, c_true, gmr_jax.discover(model, est, hold, rule=RULE)
+    sc = _scenario(eff, snr_db=50.0)
+    b = build_full(sc)
+    rep = gmr_jax.discover(b.model, b.est, b.hold, rule=RULE)
+    models = (b.truth, b.model, rep.model)
+    rep.series["model_error"] = [model_error(m, b.hold_clean, sc) for m in models]
+    return b.model, b.est, b.hold, b.c_eff, rep
 
 
 def test_concealed_coulomb_found(coulomb):
@@ -47,6 +52,24 @@ def test_concealed_coulomb_found(coulomb):
     visc = [c for c in rep.corrections if c["physics"] == "viscous_damping"][0]
     assert abs(visc["model_value"] + visc["coefficient"] - C) < 0.1 * C
     assert "Coulomb" in rep.summary()
+    # model error proper, against the noise-free holdout response: the truth scores 0
+    me_truth, me_before, me_after = rep.series["model_error"]
+    assert me_truth < 1e-9 and me_after < 0.5 * me_before
+
+
+def test_scenario_keeps_clean_signals():
+    """`build_full` keeps the noise-free signals beside the noisy recordings; `build` is its first
+    five items; another noise draw changes the noise only."""
+    sc = replace(_scenario(None, snr_db=40.0), duration=10.0)
+    b = build_full(sc, n_estimation=1, n_holdout=1)
+    rec, clean = b.hold[0], b.hold_clean[0]
+    assert np.array_equal(rec.t, clean.t) and clean.x.shape == rec.x.shape
+    noise = rec.x - clean.x
+    assert 0 < np.std(noise) < 0.03 * np.std(clean.x)  # 40 dB: 1 %
+    assert np.array_equal(build(sc, n_estimation=1, n_holdout=1)[3][0].x, rec.x)
+    b1 = build_full(replace(sc, noise_seed=1), n_estimation=1, n_holdout=1)
+    assert np.array_equal(b1.hold_clean[0].x, clean.x) and not np.array_equal(b1.hold[0].x, rec.x)
+    assert model_error(b.truth, b.hold_clean, sc) == 0.0
 
 
 def test_control_nothing_missing():

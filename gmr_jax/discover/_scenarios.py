@@ -5,10 +5,13 @@ noisy signals at a given SNR (optionally displacement and inputs only), and cali
 user's simulation model - the truth's terms without the effect - to the estimation recordings
 by equation-error least squares, so that the effect hides inside the calibrated coefficients
 (e.g. Coulomb friction inside viscous damping). Used by `benchmarks/discover_scenarios.py` and
-the tests.
+the tests. `build_full` also keeps the noise-free signals of every recording (`Clean`), so that a
+benchmark can score a model against the noise-free truth response (`model_error`), not only
+against the noisy record.
 """
 
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -46,6 +49,19 @@ class Scenario:
     fs: float = 200.0
     seed: int = 0
     sign_eps: float = 1e-4
+    noise_seed: int = 0  # 0: the original noise draw; k > 0: another draw, same inputs and truth
+
+
+@dataclass(frozen=True)
+class Clean:
+    """The noise-free signals of one recording: the truth's response to its noise-free input."""
+
+    t: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    base_acc: np.ndarray
+    force: np.ndarray
 
 
 def multisine(t, band, rms, seed):
@@ -83,10 +99,21 @@ def _simulate_run(model, sc: Scenario, seed: int):
     return t, x, v, a, b, f
 
 
+def _noise_rng(sc: Scenario, seed: int) -> np.random.Generator:
+    if sc.noise_seed == 0:
+        return np.random.default_rng(seed + 1000)
+    return np.random.default_rng([seed + 1000, sc.noise_seed])
+
+
 def record(sc: Scenario, model, seed: int, name: str) -> Recording:
     """One noisy recording of `model` under the scenario's input (inputs noisy too)."""
+    return record_with_clean(sc, model, seed, name)[0]
+
+
+def record_with_clean(sc: Scenario, model, seed: int, name: str) -> tuple[Recording, Clean]:
+    """`record` and the noise-free signals it was made from."""
     t, x, v, a, b, f = _simulate_run(model, sc, seed)
-    rng = np.random.default_rng(seed + 1000)
+    rng = _noise_rng(sc, seed)
     sig = {"x": add_noise(x, sc.snr_db, rng)}
     if sc.measured == "xva":
         sig["v"] = add_noise(v, sc.snr_db, rng)
@@ -97,7 +124,8 @@ def record(sc: Scenario, model, seed: int, name: str) -> Recording:
         fn = f.copy()
         fn[:, -1] = add_noise(f[:, -1], sc.snr_db, rng)
         sig["force"] = fn
-    return Recording(t=t, masses=np.asarray(sc.masses, float), name=name, **sig)
+    rec = Recording(t=t, masses=np.asarray(sc.masses, float), name=name, **sig)
+    return rec, Clean(t=t, x=x, v=v, a=a, base_acc=b, force=f)
 
 
 def effect_coefficient(sc: Scenario, base_model) -> float:
@@ -129,21 +157,58 @@ def calibrate(terms, masses, topology, recs, form: str) -> "object":
     return from_terms(masses, out, topology)
 
 
+class Built(NamedTuple):
+    truth: object
+    model: object
+    est: list
+    hold: list
+    c_eff: float | None
+    est_clean: list  # Clean per estimation recording
+    hold_clean: list  # Clean per holdout recording
+
+
 def build(sc: Scenario, n_estimation: int = 2, n_holdout: int = 1):
     """(truth model, calibrated simulation model, estimation recordings, holdout recordings,
     true effect coefficient or None)."""
+    return tuple(build_full(sc, n_estimation, n_holdout)[:5])
+
+
+def build_full(sc: Scenario, n_estimation: int = 2, n_holdout: int = 1) -> Built:
+    """`build` plus the noise-free signals of every recording (`Built`)."""
     base = from_terms(sc.masses, list(sc.terms), sc.topology)
     truth, c_eff = base, None
     if sc.effect is not None:
         c_eff = effect_coefficient(sc, base)
         term = sc.effect[0]
         truth = from_terms(sc.masses, list(sc.terms) + [term.model_term(c_eff)], sc.topology)
-    est = [record(sc, truth, sc.seed + 10 * k, f"{sc.name}_est{k}") for k in range(n_estimation)]
-    hold = [record(sc, truth, sc.seed + 500 + 10 * k, f"{sc.name}_hold{k}") for k in range(n_holdout)]
+    est = [record_with_clean(sc, truth, sc.seed + 10 * k, f"{sc.name}_est{k}")
+           for k in range(n_estimation)]
+    hold = [record_with_clean(sc, truth, sc.seed + 500 + 10 * k, f"{sc.name}_hold{k}")
+            for k in range(n_holdout)]
     form = "weak" if sc.measured == "x" else "strong"
-    done = [r.complete(sc.topology) for r in est]
+    done = [r.complete(sc.topology) for r, _ in est]
     model = calibrate(list(sc.terms), sc.masses, sc.topology, done, form)
-    return truth, model, est, hold, c_eff
+    return Built(truth, model, [r for r, _ in est], [r for r, _ in hold], c_eff,
+                 [c for _, c in est], [c for _, c in hold])
+
+
+def model_error(model, clean: list, sc: Scenario) -> float:
+    """Model error proper: NRMSE ||x_sim - x_true|| / ||x_true - mean|| of `model` simulated under
+    the noise-free inputs of the recordings `clean` from the truth's initial state (rest), with
+    the truth's sign smoothing, against the noise-free truth response; 0 for the truth itself.
+    nan when the model cannot be simulated."""
+    num = den = 0.0
+    m = model.with_sign_eps(sc.sign_eps)
+    for c in clean:
+        d = model.n_dof
+        inp = Sampled(jnp.asarray(c.t), jnp.asarray(c.base_acc), jnp.asarray(c.force), n_dof=d)
+        sol = simulate(m, inp, jnp.asarray(c.t), jnp.zeros(d), integrator=SIM, throw=False)
+        x = np.asarray(sol.value[0])
+        if not np.all(np.isfinite(x)):
+            return float("nan")
+        num += np.sum((x - c.x) ** 2)
+        den += np.sum((c.x - c.x.mean(0)) ** 2)
+    return float(np.sqrt(num / den))
 
 
 def with_noise(sc: Scenario, snr_db: float) -> Scenario:
