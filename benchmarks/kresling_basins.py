@@ -39,10 +39,17 @@ def main():
     p.add_argument("--fmax", type=float, default=5.0)
     p.add_argument("--amax", type=float, default=2.0)
     p.add_argument("--settle", type=float, default=40.0)
+    p.add_argument("--model", default=None, help="compare this gmr-model/1 file instead of the GMR model "
+                   "reconstructed here (e.g. benchmarks/model_gmr_kresling5_refined.json from refine_kresling.py)")
     args = p.parse_args()
     s = g.kresling5()
-    recs = g.make_recordings(s, KRESLING5_AMPLITUDE, snr_db=60.0, seed=0)
-    model = g.reconstruct(recs, g.Library(5, 5)).model
+    if args.model:
+        model = g.load_model(args.model)
+        tag = "_" + Path(args.model).stem
+    else:
+        tag = ""
+        recs = g.make_recordings(s, KRESLING5_AMPLITUDE, snr_db=60.0, seed=0)
+        model = g.reconstruct(recs, g.Library(5, 5)).model
     f = np.linspace(0.1, args.fmax, args.n)
     A = np.linspace(0.02, args.amax, args.n)
     maps = {}
@@ -54,9 +61,9 @@ def main():
         maps[name] = conf
         print(f"{name}: {time.perf_counter() - t0:.1f} s, wells {np.round(wells * 1e3, 2).tolist()} mm, "
               f"{len(np.unique(conf))} configurations, unsettled {np.mean(conf < 0):.2%}")
-        basin_figure(f, A, conf, 5, Path(__file__).with_name(f"kresling_basins_{name.split()[0].lower()}.png"),
+        basin_figure(f, A, conf, 5, Path(__file__).with_name(f"kresling_basins_{name.split()[0].lower()}{tag if name != 'truth' else ''}.png"),
                      title=f"5-cell Kresling chain, {name}")
-    np.savez(Path(__file__).with_name("kresling_basins.npz"), f=f, A=A, truth=maps["truth"], model=maps["GMR model"])
+    np.savez(Path(__file__).with_name(f"kresling_basins{tag}.npz"), f=f, A=A, truth=maps["truth"], model=maps["GMR model"])
     t, mdl = maps["truth"], maps["GMR model"]
     agree = np.mean(t == mdl)
     dist = boundary_distance(t)
@@ -64,10 +71,11 @@ def main():
     lines = [
         "# Kresling 5-cell deployment basins: GMR model vs truth",
         "",
-        f"Command: `python benchmarks/kresling_basins.py --n {args.n} --fmax {args.fmax} --amax {args.amax} --settle {args.settle:g}`. Grid {args.n} x {args.n}: f in "
+        f"Command: `python benchmarks/kresling_basins.py --n {args.n} --fmax {args.fmax} --amax {args.amax} --settle {args.settle:g}"
+        f"{' --model ' + args.model if args.model else ''}`. Grid {args.n} x {args.n}: f in "
         f"[0.1, {args.fmax}] Hz, A in [0.02, {args.amax}] N, tip half-sine (Eq. 25), start all folded, "
-        f"settle {args.settle:g} s. GMR model from 0.3 mm base sweeps (60 dB, seed 0) in the folded and deployed "
-        "configurations only.",
+        f"settle {args.settle:g} s. " + (f"Model: {args.model}. " if args.model else "GMR model from 0.3 mm base sweeps (60 dB, seed 0) in the folded and deployed "
+                                                       "configurations only."),
         "",
         f"- agreement: **{agree:.2%}** of {t.size} grid points",
         f"- disagreements: {int(np.sum(t != mdl))}; distance to the truth map's nearest basin boundary "
@@ -78,7 +86,7 @@ def main():
         "",
     ]
     text = "\n".join(lines)
-    Path(__file__).with_name("results_kresling_basins.md").write_text(text + "\n")
+    Path(__file__).with_name(f"results_kresling_basins{tag}.md").write_text(text + "\n")
     print(text)
 
 

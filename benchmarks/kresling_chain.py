@@ -74,41 +74,49 @@ def match(truth_peaks, peaks):
     return np.array(out)
 
 
-def part_trans(system, models, lines, seed):
-    freqs = np.linspace(0.5, 10.0, 120)
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.2), sharey=True)
-    lines += ["## 5-cell chain: transmissibility (Fig. 10)", "",
-              f"Tip displacement transmissibility, base amplitude {TRANS_AMPLITUDE * 1e3:g} mm, "
-              f"0.5-10 Hz; models from 0.3 mm base sweeps (60 dB, seed {seed}). Resonance peaks "
-              "refined on a +-3 % zoom; error = nearest model peak vs each truth peak.", "",
-              "| configuration | truth peaks (Hz) | GMR peaks (Hz) | GMR max error | GMC-SINDy peaks (Hz) | "
+TABLE_HEAD = ["| configuration | truth peaks (Hz) | GMR peaks (Hz) | GMR max error | GMC-SINDy peaks (Hz) | "
               "GMC-SINDy max error |", "|---|---|---|---|---|---|"]
-    for ax, bits in zip(axes, ((0,) * 5, (1,) * 5)):
-        row, curves = {}, {}
+
+
+def compare_transmissibility(system, models, configs, freqs, lines, path, title, label=""):
+    """Transmissibility of every model in each configuration (bit tuples): one table row and
+    one panel per configuration, peaks matched to the truth's."""
+    fig, axes = plt.subplots(1, len(configs), figsize=(6 * len(configs), 4.2), sharey=True)
+    fmt = lambda p: ", ".join(f"{x:.3f}" for x in p)  # noqa: E731
+    for ax, bits in zip(np.atleast_1d(axes), configs):
+        row = {}
         for name, m in models.items():
             x_eq, _ = config_state(m, system, bits)
             t0 = time.perf_counter()
             td, peaks, ok = refined_peaks(m, x_eq, freqs)
-            curves[name] = td
             row[name] = peaks
             print(f"  transmissibility {config_label(bits)} {name}: {time.perf_counter() - t0:.1f} s, "
                   f"peaks {np.round(peaks, 3).tolist()}{'' if ok else ' (SOLVE FAILED)'}", flush=True)
             ax.plot(freqs, td, {"truth": "k-", "GMR": "C0--", "GMC-SINDy": "C3:"}[name], label=name)
         errs = {n: match(row["truth"], row[n]) for n in ("GMR", "GMC-SINDy")}
-        fmt = lambda p: ", ".join(f"{x:.3f}" for x in p)  # noqa: E731
         lines.append(f"| {config_label(bits)} | {fmt(row['truth'])} | {fmt(row['GMR'])} | "
                      f"{100 * np.nanmax(np.abs(errs['GMR'])):.2f} % | {fmt(row['GMC-SINDy'])} | "
                      f"{100 * np.nanmax(np.abs(errs['GMC-SINDy'])):.2f} % |")
-        ax.set_title(f"configuration {config_label(bits)}")
+        ax.set_title(f"{label}configuration {config_label(bits)}")
         ax.set_xlabel("base frequency f [Hz]")
         ax.grid(alpha=0.3)
-    axes[0].set_ylabel("T_d = 20 log10(X_tip / X_b) [dB]")
-    axes[0].legend()
-    fig.suptitle("5-cell Kresling chain: tip transmissibility, model vs truth (Eq. 24)")
+    np.atleast_1d(axes)[0].set_ylabel("T_d = 20 log10(X_tip / X_b) [dB]")
+    np.atleast_1d(axes)[0].legend()
+    fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(HERE / "kresling_transmissibility.png", dpi=120)
+    fig.savefig(path, dpi=120)
     plt.close(fig)
     lines.append("")
+
+
+def part_trans(system, models, lines, seed):
+    lines += ["## 5-cell chain: transmissibility (Fig. 10)", "",
+              f"Tip displacement transmissibility, base amplitude {TRANS_AMPLITUDE * 1e3:g} mm, "
+              f"0.5-10 Hz; models from 0.3 mm base sweeps (60 dB, seed {seed}). Resonance peaks "
+              "refined on a +-3 % zoom; error = nearest model peak vs each truth peak.", ""] + TABLE_HEAD
+    compare_transmissibility(system, models, ((0,) * 5, (1,) * 5), np.linspace(0.5, 10.0, 120), lines,
+                             HERE / "kresling_transmissibility.png",
+                             "5-cell Kresling chain: tip transmissibility, model vs truth (Eq. 24)")
 
 
 #: (f Hz, A N): quasi-static (slow pulse, the chain follows the load), intermediate, impact
@@ -186,37 +194,14 @@ def part_deploy(system, models, lines, settle=40.0):
 def part_three(lines, seed):
     system = g.kresling3()
     recs, models, recons = models_for(system, KRESLING3_AMPLITUDE, seed)
-    freqs = np.linspace(0.5, 12.0, 120)
     lines += ["## 3-cell prototype-like chain: unseen configurations (Fig. 14, Table 2)", "",
               f"Trained on 0-0-0 and 1-1-1 only (0.3 mm base sweeps, 60 dB, seed {seed}); transmissibility "
-              f"peaks (base {TRANS_AMPLITUDE * 1e3:g} mm) of configurations never recorded.", "",
-              "| configuration | truth peaks (Hz) | GMR peaks (Hz) | GMR max error | GMC-SINDy peaks (Hz) | "
-              "GMC-SINDy max error |", "|---|---|---|---|---|---|"]
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.2), sharey=True)
-    for ax, bits in zip(axes, ((0, 0, 1), (1, 1, 0))):
-        row = {}
-        for name, m in models.items():
-            x_eq, _ = config_state(m, system, bits)
-            td, peaks, ok = refined_peaks(m, x_eq, freqs)
-            row[name] = peaks
-            print(f"  3-cell {config_label(bits)} {name}: peaks {np.round(peaks, 3).tolist()}"
-                  f"{'' if ok else ' (SOLVE FAILED)'}", flush=True)
-            ax.plot(freqs, td, {"truth": "k-", "GMR": "C0--", "GMC-SINDy": "C3:"}[name], label=name)
-        errs = {n: match(row["truth"], row[n]) for n in ("GMR", "GMC-SINDy")}
-        fmt = lambda p: ", ".join(f"{x:.3f}" for x in p)  # noqa: E731
-        lines.append(f"| {config_label(bits)} | {fmt(row['truth'])} | {fmt(row['GMR'])} | "
-                     f"{100 * np.nanmax(np.abs(errs['GMR'])):.2f} % | {fmt(row['GMC-SINDy'])} | "
-                     f"{100 * np.nanmax(np.abs(errs['GMC-SINDy'])):.2f} % |")
-        ax.set_title(f"unseen configuration {config_label(bits)}")
-        ax.set_xlabel("base frequency f [Hz]")
-        ax.grid(alpha=0.3)
-    axes[0].set_ylabel("T_d [dB]")
-    axes[0].legend()
-    fig.suptitle("3-cell Kresling chain trained on 0-0-0 and 1-1-1: prediction of unseen configurations")
-    fig.tight_layout()
-    fig.savefig(HERE / "kresling_three.png", dpi=120)
-    plt.close(fig)
-    lines += ["", "Training fit (Table 2): force of each cell, R^2 and NRMSE, worst over cells, per recording.", "",
+              f"peaks (base {TRANS_AMPLITUDE * 1e3:g} mm) of configurations never recorded.", ""] + TABLE_HEAD
+    compare_transmissibility(system, models, ((0, 0, 1), (1, 1, 0)), np.linspace(0.5, 12.0, 120), lines,
+                             HERE / "kresling_three.png",
+                             "3-cell Kresling chain trained on 0-0-0 and 1-1-1: prediction of unseen configurations",
+                             label="unseen ")
+    lines += ["Training fit (Table 2): force of each cell, R^2 and NRMSE, worst over cells, per recording.", "",
               "| method | recording | min R^2 | max NRMSE |", "|---|---|---|---|"]
     for name, res in recons.items():
         for rec, sc in res.training.items():
