@@ -194,6 +194,8 @@ def main():
     solb = refine(raw, train_b, free=free, settings=settings_b, holdout=hold_b, throw=False)
     t_refb = time.time() - t1
     ref = solb.value
+    g.save_model(raw, Path(__file__).with_name("model_gmr_kresling5.json"), method="GMR")
+    g.save_model(ref, Path(__file__).with_name("model_gmr_kresling5_refined.json"), method="GMR + refine")
     fb0, fb1 = output_error(raw, hold_b, None), output_error(ref, hold_b, None)
     stb = solb.stats
     wb, wa = stb["holdout"]["before"].nrmse, stb["holdout"]["after"].nrmse
