@@ -112,3 +112,21 @@ def test_fit_chain_recordings_one_file_per_configuration(tmp_path, capsys):
         assert restoring_error(m, s.truth, i, s.x_range[i]) < 0.03
     wells = g.stable_wells(m, s.x_range)
     np.testing.assert_allclose(wells[:, :2], s.equilibria.T, atol=0.02 * np.ptp(s.equilibria))
+
+
+@pytest.mark.slow
+def test_chain_demo_kresling3(tmp_path):
+    """`gmr demo --system kresling3`: per-cell report, figures, models; GMR within the chain
+    targets (restoring <= 3 %, equilibria right, resonances within 2 %)."""
+    assert main(["demo", "--system", "kresling3", "--out", str(tmp_path)]) == 0
+    rep = json.loads((tmp_path / "report_kresling3.json").read_text())
+    assert len(rep["cells"]) == 3
+    for c in rep["cells"]:
+        assert c["gmr"]["restoring_error"] < 0.03 and c["gmr"]["equilibria_ok"]
+        assert (tmp_path / f"cell{c['cell']}_kresling3.png").exists()
+    for conf in ("folded", "deployed"):
+        assert len(rep["transmissibility"][conf]["truth"]["peaks"]) >= 2
+        assert rep["transmissibility"][conf]["GMR"]["max_peak_error"] < 0.02
+    assert (tmp_path / "transmissibility_kresling3.png").exists()
+    m = g.load_model(tmp_path / "model_gmr_kresling3.json")
+    assert m.n_dof == 3 and m.topology == "chain"
