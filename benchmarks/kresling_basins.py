@@ -1,92 +1,211 @@
-"""Deployment basins of the 5-cell Kresling chain: reconstructed GMR model vs the truth system
-on the same (f, A) grid (paper Fig. 11; issue 4's agreement check).
+"""Deployment basins of the 5-cell Kresling chain: reconstructed models vs the truth on one
+(f, A) grid (paper Fig. 11; the basin issue's agreement check).
 
-Run: python benchmarks/kresling_basins.py [--n 100]   (writes benchmarks/results_kresling_basins.md
-and benchmarks/kresling_basins.png)
+For each seed, GMR (and, for the first seed, GMC-SINDy(5,5)) is reconstructed from 60 dB base
+sweeps in the folded and deployed configurations only, and its basin map under the Eq. (25)
+tip half-sine is compared with the truth's on the same grid. Alongside:
+
+- the *predictability* of the truth's map: the truth with every stiffness changed by +-0.1 %
+  and +1 % (an identification error far below / at what small vibrations can promise). Points
+  where truth, truth +0.1 % and truth -0.1 % agree are the "predictable" points; agreement is
+  also reported on those alone;
+- where the disagreements lie: Chebyshev distance (grid cells) to the nearest point of another
+  configuration in the truth's map, beside the same distance for every grid point (on a finely
+  striped map every point is near a boundary, which makes "near a boundary" say nothing).
+
+Default chain: `kresling5(damping_ratio=KRESLING5_DEPLOYMENT_DAMPING)` (0.2) trained at
+`KRESLING5_DEPLOYMENT_AMPLITUDE` (0.5 mm: 5 % of the interwell distance at the base cell);
+`--zeta 0.04 --amp 3e-4 --settle 40` runs the lightly damped built-in chain.
+
+Run: python benchmarks/kresling_basins.py [--n 100] [--seeds 0 1 2] [--zeta 0.2] [--amp 5e-4]
+Writes benchmarks/results_kresling_basins_z<zeta>.md and kresling_basins_z<zeta>_*.png.
 """
 
 import argparse
 import os
+import sys
 import time
 from pathlib import Path
 
 os.environ.setdefault("EQX_ON_ERROR", "nan")
 
-import numpy as np  # noqa: E402
-
 import gmr_jax as g  # noqa: E402
+
+g.use_cpu_cores()  # all cores as JAX CPU devices: the sweeps are sharded over them
+
+import equinox as eqx  # noqa: E402
+import jax  # noqa: E402
+import matplotlib  # noqa: E402
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from scipy import ndimage  # noqa: E402
+
 from gmr_jax.plots._basins import basin_figure, config_label  # noqa: E402
-from gmr_jax.systems._kresling import KRESLING5_AMPLITUDE  # noqa: E402
+from gmr_jax.systems._kresling import (  # noqa: E402
+    KRESLING5_DEPLOYMENT_AMPLITUDE,
+    KRESLING5_DEPLOYMENT_DAMPING,
+)
+
+HERE = Path(__file__).parent
 
 
-def boundary_distance(config):
-    """Chebyshev distance (grid cells) from each cell to the nearest cell of another configuration."""
-    na, nf = config.shape
+def boundary_distance(config: np.ndarray) -> np.ndarray:
+    """Chebyshev distance (grid cells) from each point to the nearest point of another
+    configuration (grid edges do not count as boundaries)."""
     dist = np.full(config.shape, np.inf)
-    for i in range(na):
-        for j in range(nf):
-            for r in range(1, max(na, nf)):
-                win = config[max(0, i - r):i + r + 1, max(0, j - r):j + r + 1]
-                if np.any(win != config[i, j]):
-                    dist[i, j] = r
-                    break
+    c = config.astype(float)
+    for r in range(1, max(config.shape)):
+        size = 2 * r + 1
+        lo = ndimage.minimum_filter(c, size=size, mode="nearest")
+        hi = ndimage.maximum_filter(c, size=size, mode="nearest")
+        new = (lo != hi) & np.isinf(dist)
+        dist[new] = r
+        if np.all(np.isfinite(dist)):
+            break
     return dist
+
+
+def scaled_stiffness(chain, factor):
+    c = chain.cells
+    return eqx.tree_at(lambda ch: ch.cells, chain,
+                       eqx.tree_at(lambda c: (c.k_a, c.k_b), c, (c.k_a * factor, c.k_b * factor)))
+
+
+def sweep(model, system, f, A, settings):
+    wells = g.stable_wells(model, system.x_range)
+    t0 = time.perf_counter()
+    conf = np.asarray(g.basin_map(model, f, A, wells, settings=settings).config)
+    return conf, time.perf_counter() - t0
+
+
+def distance_summary(dist, mask):
+    d = dist[mask]
+    if d.size == 0:
+        return "none"
+    return (f"median {np.median(d):.0f}, {np.mean(d <= 1):.0%} within 1 cell, {np.mean(d <= 3):.0%} within 3, "
+            f"max {d.max():.0f}")
+
+
+def difference_figure(f, A, truth, model, path, title):
+    fig, ax = plt.subplots(figsize=(7, 4.6), constrained_layout=True)
+    edge = boundary_distance(truth) <= 1
+    img = np.where(truth != model, 2, np.where(edge, 1, 0))
+    cmap = matplotlib.colors.ListedColormap(["white", "0.8", "crimson"])
+    ax.pcolormesh(f, A, img, cmap=cmap, vmin=-0.5, vmax=2.5, shading="auto")
+    ax.legend([plt.Rectangle((0, 0), 1, 1, color=c) for c in ("0.8", "crimson")],
+              ["truth basin boundary (1 cell)", "model != truth"], loc="upper right", fontsize=8)
+    ax.set_xlabel("actuation frequency f [Hz]")
+    ax.set_ylabel("actuation amplitude A [N]")
+    ax.set_title(title, fontsize=10)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def main():
     p = argparse.ArgumentParser()
     p.add_argument("--n", type=int, default=100)
+    p.add_argument("--zeta", type=float, default=KRESLING5_DEPLOYMENT_DAMPING)
+    p.add_argument("--amp", type=float, default=KRESLING5_DEPLOYMENT_AMPLITUDE, help="training base amplitude (m)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--fmax", type=float, default=5.0)
-    p.add_argument("--amax", type=float, default=2.0)
-    p.add_argument("--settle", type=float, default=40.0)
-    p.add_argument("--model", default=None, help="compare this gmr-model/1 file instead of the GMR model "
-                   "reconstructed here (e.g. benchmarks/model_gmr_kresling5_refined.json from refine_kresling.py)")
+    p.add_argument("--amax", type=float, default=1.0)
+    p.add_argument("--settle", type=float, default=20.0)
+    p.add_argument("--model", default=None, help="also compare this gmr-model/1 file (e.g. a refined model)")
     args = p.parse_args()
-    s = g.kresling5()
-    if args.model:
-        model = g.load_model(args.model)
-        tag = "_" + Path(args.model).stem
-    else:
-        tag = ""
-        recs = g.make_recordings(s, KRESLING5_AMPLITUDE, snr_db=60.0, seed=0)
-        model = g.reconstruct(recs, g.Library(5, 5)).model
+    cmd = "python " + " ".join([Path(sys.argv[0]).as_posix()] + sys.argv[1:])
+    t_start = time.perf_counter()
+    system = g.kresling5(damping_ratio=args.zeta)
+    tag = f"z{args.zeta:g}"
     f = np.linspace(0.1, args.fmax, args.n)
     A = np.linspace(0.02, args.amax, args.n)
-    maps = {}
-    for name, m in (("truth", s.truth), ("GMR model", model)):
-        wells = g.stable_wells(m, s.x_range)
+    settings = g.SweepSettings(settle_time=args.settle)
+    truth, t_truth = sweep(system.truth, system, f, A, settings)
+    print(f"truth: {t_truth:.0f} s, {len(np.unique(truth))} configurations, unsettled {np.mean(truth < 0):.2%}",
+          flush=True)
+    ref = {}
+    for name, factor in (("+0.1 %", 1.001), ("-0.1 %", 0.999), ("+1 %", 1.01)):
+        ref[name], _ = sweep(scaled_stiffness(system.truth, factor), system, f, A, settings)
+        print(f"  truth, stiffness {name}: {np.mean(ref[name] == truth):.2%}", flush=True)
+    predictable = (ref["+0.1 %"] == truth) & (ref["-0.1 %"] == truth)
+    dist = boundary_distance(truth)
+
+    rows, first = [], {}
+    models = []
+    for seed in args.seeds:
+        recs = g.make_recordings(system, args.amp, snr_db=60.0, seed=seed)
         t0 = time.perf_counter()
-        bm = g.basin_map(m, f, A, wells, settings=g.SweepSettings(settle_time=args.settle))
-        conf = np.asarray(bm.config)
-        maps[name] = conf
-        print(f"{name}: {time.perf_counter() - t0:.1f} s, wells {np.round(wells * 1e3, 2).tolist()} mm, "
-              f"{len(np.unique(conf))} configurations, unsettled {np.mean(conf < 0):.2%}")
-        basin_figure(f, A, conf, 5, Path(__file__).with_name(f"kresling_basins_{name.split()[0].lower()}{tag if name != 'truth' else ''}.png"),
-                     title=f"5-cell Kresling chain, {name}")
-    np.savez(Path(__file__).with_name(f"kresling_basins{tag}.npz"), f=f, A=A, truth=maps["truth"], model=maps["GMR model"])
-    t, mdl = maps["truth"], maps["GMR model"]
-    agree = np.mean(t == mdl)
-    dist = boundary_distance(t)
-    dis = dist[t != mdl]
+        gmr = g.reconstruct(recs, g.Library(5, 5)).model
+        t_fit = time.perf_counter() - t0
+        models.append((f"GMR, seed {seed}", gmr, t_fit, recs))
+        if seed == args.seeds[0]:
+            models.append((f"GMC-SINDy(5,5), seed {seed}", g.gmc_sindy(recs, g.Library(5, 5)).model, None, recs))
+    if args.model:
+        models.append((f"{Path(args.model).name}", g.load_model(args.model), None, None))
+    for name, model, t_fit, _ in models:
+        conf, t_map = sweep(model, system, f, A, settings)
+        agree = float(np.mean(conf == truth))
+        rest = [100 * g.restoring_error(model, system.truth, i, system.x_range[i]) for i in range(5)]
+        damp = [100 * g.damping_error(model, system.truth, i, system.x_range[i], system.v_range[i])
+                for i in range(5)]
+        row = {"name": name, "agree": agree, "agree_pred": float(np.mean(conf[predictable] == truth[predictable])),
+               "dist": distance_summary(dist, conf != truth), "n_dis": int(np.sum(conf != truth)),
+               "unsettled": float(np.mean(conf < 0)), "rest": rest, "damp": damp, "t_map": t_map}
+        rows.append(row)
+        print(f"{name}: agreement {agree:.2%} (predictable points {row['agree_pred']:.2%}), map {t_map:.0f} s; "
+              f"disagreements {row['n_dis']}: {row['dist']}; restoring % "
+              + ", ".join(f"{e:.2f}" for e in rest), flush=True)
+        if not first and name.startswith("GMR"):
+            first = {"name": name, "conf": conf}
+
+    basin_figure(f, A, truth, 5, HERE / f"kresling_basins_{tag}_truth.png",
+                 title=f"5-cell Kresling chain (damping ratio {args.zeta:g}), truth")
+    basin_figure(f, A, first["conf"], 5, HERE / f"kresling_basins_{tag}_gmr.png",
+                 title=f"5-cell Kresling chain (damping ratio {args.zeta:g}), {first['name']}")
+    difference_figure(f, A, truth, first["conf"], HERE / f"kresling_basins_{tag}_difference.png",
+                      f"{first['name']} vs truth: {np.mean(first['conf'] == truth):.1%} agree")
+
+    gmr_rows = [r for r in rows if r["name"].startswith("GMR")]
     lines = [
-        "# Kresling 5-cell deployment basins: GMR model vs truth",
-        "",
-        f"Command: `python benchmarks/kresling_basins.py --n {args.n} --fmax {args.fmax} --amax {args.amax} --settle {args.settle:g}"
-        f"{' --model ' + args.model if args.model else ''}`. Grid {args.n} x {args.n}: f in "
-        f"[0.1, {args.fmax}] Hz, A in [0.02, {args.amax}] N, tip half-sine (Eq. 25), start all folded, "
-        f"settle {args.settle:g} s. " + (f"Model: {args.model}. " if args.model else "GMR model from 0.3 mm base sweeps (60 dB, seed 0) in the folded and deployed "
-                                                       "configurations only."),
-        "",
-        f"- agreement: **{agree:.2%}** of {t.size} grid points",
-        f"- disagreements: {int(np.sum(t != mdl))}; distance to the truth map's nearest basin boundary "
-        f"(grid cells): " + (f"median {np.median(dis):.0f}, 90th percentile {np.percentile(dis, 90):.0f}, "
-                             f"max {dis.max():.0f}" if dis.size else "none"),
-        f"- configurations in the truth map: "
-        + ", ".join(f"{config_label(int(c), 5)} ({np.sum(t == c)})" for c in np.unique(t)),
-        "",
+        f"# Kresling 5-cell deployment basins (damping ratio {args.zeta:g}): reconstructed models vs truth", "",
+        f"Command: `{cmd}` ({time.perf_counter() - t_start:.0f} s on {len(jax.devices())} CPU devices). "
+        f"Grid {args.n} x {args.n}: f in [0.1, {args.fmax:g}] Hz, A in [0.02, {args.amax:g}] N; tip half-sine "
+        f"(Eq. 25) from all folded, settle {args.settle:g} s, `basin_map` defaults (rtol 1e-6, joint batching). "
+        f"Models from {args.amp * 1e3:g} mm base sweeps (0.5-10 Hz, 30 s, 60 dB) in the folded and deployed "
+        "configurations only; GMR `reconstruct(recs, Library(5, 5))` with the defaults.", "",
+        "## Agreement with the truth's map", "",
+        "| model | agreement | on predictable points | disagreements: distance to a truth boundary (cells) | "
+        "unsettled | restoring error per cell (%) | damping error per cell (%) |",
+        "|---|---:|---:|---|---:|---|---|",
     ]
-    text = "\n".join(lines)
-    Path(__file__).with_name(f"results_kresling_basins{tag}.md").write_text(text + "\n")
+    for r in rows:
+        lines.append(f"| {r['name']} | **{r['agree']:.2%}** | {r['agree_pred']:.2%} | {r['dist']} | "
+                     f"{r['unsettled']:.2%} | " + ", ".join(f"{e:.2f}" for e in r["rest"]) + " | "
+                     + ", ".join(f"{e:.2f}" for e in r["damp"]) + " |")
+    ag = np.array([r["agree"] for r in gmr_rows])
+    lines += [
+        "",
+        f"GMR over {len(ag)} seed(s): agreement min {ag.min():.2%}, median {np.median(ag):.2%}, max {ag.max():.2%}.",
+        "",
+        "## How predictable is the truth's map?", "",
+        "| truth compared with | agreement |", "|---|---:|",
+    ]
+    lines += [f"| truth, every stiffness {k} | {np.mean(v == truth):.2%} |" for k, v in ref.items()]
+    lines += [
+        "",
+        f"Predictable points (truth = truth +-0.1 % stiffness): {np.mean(predictable):.1%} of the grid. "
+        f"Every grid point's distance to a truth boundary: {distance_summary(dist, np.ones_like(truth, bool))}.",
+        "",
+        f"Configurations in the truth map ({len(np.unique(truth))}): "
+        + ", ".join(f"{config_label(int(c), 5)} ({np.sum(truth == c)})" for c in np.unique(truth)),
+        "",
+        f"Figures: `kresling_basins_{tag}_truth.png`, `kresling_basins_{tag}_gmr.png` ({first['name']}), "
+        f"`kresling_basins_{tag}_difference.png`. Sweep time per map: truth {t_truth:.0f} s, GMR "
+        f"{np.median([r['t_map'] for r in gmr_rows]):.0f} s.",
+    ]
+    text = "\n".join(lines) + "\n"
+    (HERE / f"results_kresling_basins_{tag}.md").write_text(text)
     print(text)
 
 

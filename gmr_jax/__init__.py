@@ -4,6 +4,7 @@ Importing gmr_jax enables JAX float64 (`jax_enable_x64`): the numerics need it.
 """
 
 from . import _config as _config  # noqa: F401  (enables x64 first)
+from ._config import use_cpu_cores as use_cpu_cores
 from ._errors import GMRInputError as GMRInputError
 from ._reconstruct import (
     DEFAULT_SOLVER as DEFAULT_SOLVER,
@@ -37,6 +38,7 @@ from .simulate._inputs import (
     AbstractInput as AbstractInput,
     BaseChirp as BaseChirp,
     BaseSine as BaseSine,
+    HalfSineBase as HalfSineBase,
     HalfSineTip as HalfSineTip,
     NoInput as NoInput,
     Sampled as Sampled,

@@ -137,10 +137,11 @@ def _screen(fits: LocalFit, n_sigma: float) -> LocalFit:
     return eqx.tree_at(lambda f: (f.coef, f.covariance), fits, (jnp.where(keep, fits.coef, 0.0), cov))
 
 
-def low_order_terms(library: Library) -> np.ndarray:
-    """Mask of the terms that give each well's Hermite values and slopes: stiffness x^0, x^1,
-    and the damping polynomial's v and x v."""
-    keep = {(STIFFNESS, 0), (STIFFNESS, 1), (VELOCITY_DAMPING, 1), (POSITION_DAMPING, 1)}
+def low_order_terms(library: Library, restoring_order: int = 1) -> np.ndarray:
+    """Mask of the local terms exempt from the STLS threshold: the restoring Taylor terms
+    x^0 .. x^`restoring_order` and the damping polynomial's v and x v (value and slope)."""
+    keep = {(STIFFNESS, k) for k in range(restoring_order + 1)}
+    keep |= {(VELOCITY_DAMPING, 1), (POSITION_DAMPING, 1)}
     return np.array([t in keep for t in library.terms()])
 
 
@@ -164,6 +165,7 @@ def reconstruct(
     screen_sigma: float | None = 3.0,
     coordination: str = "gls",
     keep_low_orders: bool = True,
+    keep_restoring_order: int | None = None,
 ) -> Reconstruction:
     """Global model reconstruction, Algorithm 1, from small-vibration recordings.
 
@@ -181,18 +183,27 @@ def reconstruct(
       rule would otherwise raise the global degree and distort the model. None disables it.
     - `well_tol`: recordings whose mean deformation of a cell differs by less than this
       fraction of that cell's spread are taken as the same well of that cell and pooled.
-    - `keep_low_orders`: the local terms that carry each well's value and slope of the
-      restoring law (x^0, x^1) and of the damping polynomial (v, x v) are exempt from the STLS
-      threshold (refitted on the STLS support plus these; the `screen_sigma` t-test still
-      applies). The CV threshold judges a term by its share of the *local* force; a damping
-      slope x v is a tiny share of it near a stiff well yet fixes the damping across the
-      interwell span (5-cell Kresling, cells 4-5: damping error 43 % -> see RESULTS.md).
+    - `keep_low_orders`: the local Taylor terms the coordination needs, the restoring law's
+      x^0 .. x^`keep_restoring_order` and the damping polynomial's v, x v, are exempt from the
+      STLS threshold (refitted on the STLS support plus these; the `screen_sigma` t-test
+      still decides whether each is kept). The CV threshold judges a term by its share of the
+      *local* force; a damping slope x v or a restoring x^3 is a tiny share of it at small
+      amplitude, yet fixes the global law between the wells. Kresling truss: the Hermite
+      interpolant from F, F', F'' at both wells is 1.3 % off (critical force 0.7 %), from
+      F to its third derivative 0.09 %; a dropped x^3 also biases the slope (RESULTS.md).
+    - `keep_restoring_order`: see `keep_low_orders`. Default (None): 3 when every recording
+      carries measured velocities and accelerations, 1 when they had to be estimated from x:
+      the differentiation filter's gain error then correlates with the amplitude and a kept
+      x^3 absorbs it (bistable joint at 1 degree from x alone: x^3 17 times too large).
     - `coordination`: "gls" (covariance-weighted, lowest adequate degree) or "hermite" (the
       paper's exact interpolant); see `coordinate`.
 
     **Returns:** a `Reconstruction` with the `GlobalModel` (standard errors attached) and per-DOF
     reports (equilibria, local coefficients, global orders, condition numbers).
     """
+    measured = all(r.v is not None and r.a is not None and not r.derived for r in recordings)
+    if keep_restoring_order is None:
+        keep_restoring_order = 3 if measured else 1
     recs, masses, topology = _resolve(recordings, masses, topology)
     d = recs[0].n_dof
     targets = [regression_targets(r, masses, topology) for r in recs]
@@ -211,7 +222,7 @@ def reconstruct(
         xs, w = _pad_stack([[recs[k].x[:, i] for k in g] for g in groups])
         vs, _ = _pad_stack([[recs[k].v[:, i] for k in g] for g in groups])
         ys, _ = _pad_stack([[targets[k][:, i] for k in g] for g in groups])
-        keep = jnp.asarray(low_order_terms(library)) if keep_low_orders else None
+        keep = jnp.asarray(low_order_terms(library, keep_restoring_order)) if keep_low_orders else None
         sols = _fit_wells(jnp.asarray(xs), jnp.asarray(vs), jnp.asarray(ys), jnp.asarray(w), library, solver,
                           select, keep)
         fits: LocalFit = sols.value

@@ -1,11 +1,12 @@
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import gmr_jax as g
 from gmr_jax.basins._sweep import SweepSettings, basin_map
 from gmr_jax.basins._wells import stable_wells
-from gmr_jax.simulate._inputs import HalfSineTip
+from gmr_jax.simulate._inputs import HalfSineBase, HalfSineTip
 
 
 def chain():
@@ -91,3 +92,93 @@ def test_sharded_over_two_host_devices_matches_and_does_not_recompile():
     """)
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0 and "OK" in r.stdout, r.stderr[-2000:]
+
+
+def test_joint_and_member_batching_agree_and_meet_the_tolerance():
+    # joint: one ODE per chunk, shared step, max-over-members error norm; member: vmap of solves
+    m = chain()
+    wells = stable_wells(m, [[-0.05, 0.05]] * 2)
+    f, A = jnp.linspace(0.3, 4.5, 7), jnp.linspace(0.2, 2.8, 6)
+    joint = basin_map(m, f, A, wells, chunk=8)
+    member = basin_map(m, f, A, wells, chunk=8, settings=SweepSettings(batching="member"))
+    assert np.array_equal(np.asarray(joint.config), np.asarray(member.config))
+    assert np.all(np.asarray(joint.config) >= 0)
+    # both are within tolerance-level distance of a much tighter reference on a few points
+    tight = SweepSettings(rtol=1e-10, atol=1e-12, batching="member")
+    ref = basin_map(m, f[::3], A[::2], wells, settings=tight)
+    for bm in (joint, member):
+        np.testing.assert_allclose(np.asarray(bm.x_final)[::2, ::3], np.asarray(ref.x_final), atol=2e-4)
+    # the shared step is set by the hardest member (max-norm, not a mean over the chunk): every
+    # joint chunk takes about as many steps as each of its members took alone, or more
+    assert np.all(np.asarray(joint.steps) >= 0.9 * np.asarray(member.steps))
+
+
+def test_base_load_matches_plain_simulation():
+    m = chain()
+    wells = stable_wells(m, [[-0.05, 0.05]] * 2)
+    f, A = jnp.array([0.7, 3.0]), jnp.array([8.0, 30.0])
+    bm = basin_map(m, f, A, wells, settings=SweepSettings(load="base"))
+    for i in range(2):
+        for j in range(2):
+            t1 = 0.5 / float(f[j]) + 10.0
+            sol = g.simulate(m, HalfSineBase(f[j], A[i], n_dof=2), jnp.array([0.0, t1]), jnp.asarray(wells[:, 0]))
+            x1 = np.asarray(sol.value[0])[-1]
+            want = [int(np.argmin(np.abs(x1[k] - wells[k]))) for k in range(2)]
+            assert list(np.asarray(bm.wells[i, j])) == want
+    assert len(set(np.asarray(bm.config).ravel().tolist())) > 1  # the grid is not trivial
+
+
+def test_failed_joint_chunk_is_rerun_point_by_point():
+    m = chain()
+    wells = stable_wells(m, [[-0.05, 0.05]] * 2)
+    f, A = jnp.array([0.3, 4.5]), jnp.array([0.5, 2.5])
+    member = basin_map(m, f, A, wells, settings=SweepSettings(batching="member"))
+    joint = basin_map(m, f, A, wells)
+    need_member, need_joint = int(np.max(member.steps)), int(np.max(joint.steps))
+    assert need_joint > need_member  # the shared step costs steps
+    budget = SweepSettings(max_steps=need_member + 5)
+    bm = basin_map(m, f, A, wells, settings=budget)  # the joint solve runs out, members do not
+    assert np.array_equal(np.asarray(bm.config), np.asarray(member.config))
+    assert np.array_equal(np.asarray(bm.steps), np.asarray(member.steps))
+    assert np.all(np.asarray(bm.result) == g.RESULTS.successful._value)
+
+
+def test_progress_blocks_give_the_same_map():
+    m = chain()
+    wells = stable_wells(m, [[-0.05, 0.05]] * 2)
+    f, A = jnp.linspace(0.3, 4.5, 9), jnp.linspace(0.2, 2.8, 5)
+    calls = []
+    a = basin_map(m, f, A, wells, chunk=4, progress=lambda done, total: calls.append((done, total)))
+    b = basin_map(m, f, A, wells, chunk=4)
+    assert np.array_equal(np.asarray(a.config), np.asarray(b.config))
+    assert len(calls) > 1 and calls[-1] == (45, 45) and all(d <= t for d, t in calls)
+
+
+def test_new_settle_time_or_tolerance_does_not_recompile():
+    from gmr_jax.basins import _sweep
+
+    m = chain()
+    wells = stable_wells(m, [[-0.05, 0.05]] * 2)
+    basin_map(m, jnp.array([1.0, 2.0]), jnp.array([1.0]), wells, settings=SweepSettings(settle_time=3.0))
+    before = _sweep.n_chunk_compiles()
+    basin_map(m, jnp.array([1.0, 2.0]), jnp.array([0.5]), wells, settings=SweepSettings(settle_time=4.0, rtol=1e-7))
+    assert _sweep.n_chunk_compiles() == before
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"f": [0.0, 1.0]}, "f must be > 0"),
+    ({"A": [np.nan]}, "A contains NaN"),
+    ({"f": [[1.0]]}, "1-D"),
+    ({"wells": np.zeros((3, 2))}, "wells must be"),
+    ({"wells": np.full((2, 2), np.nan)}, "no stable well"),
+    ({"x0": [0.0]}, "x0 must be"),
+])
+def test_bad_inputs_name_the_problem(kwargs, match):
+    m = chain()
+    args = {"f": [1.0], "A": [1.0], "wells": stable_wells(m, [[-0.05, 0.05]] * 2)}
+    args.update({k: v for k, v in kwargs.items() if k in args})
+    extra = {k: v for k, v in kwargs.items() if k not in args}
+    with pytest.raises(g.GMRInputError, match=match):
+        basin_map(m, args["f"], args["A"], args["wells"], **extra)
+    with pytest.raises(g.GMRInputError, match="load must be"):
+        SweepSettings(load="top")

@@ -87,8 +87,30 @@ def _grid(spec, name):
     return np.linspace(a, b, n)
 
 
+def _start(spec, wells):
+    """x0 from a configuration label like 0-1-1-0-0 (cell 0 first; a digit = that cell's well)."""
+    if spec is None:
+        return None
+    try:
+        idx = [int(c) for c in spec.split("-")]
+    except ValueError:
+        raise GMRInputError(f"--start must look like 0-1-1-0-0 (one well index per DOF), got {spec!r}") from None
+    n_wells = np.sum(~np.isnan(wells), axis=1)
+    if len(idx) != wells.shape[0] or any(k < 0 or k >= n for k, n in zip(idx, n_wells)):
+        raise GMRInputError(f"--start {spec!r}: need {wells.shape[0]} well indices, each below that DOF's "
+                            f"number of wells {n_wells.tolist()}")
+    return np.array([wells[i, k] for i, k in enumerate(idx)])
+
+
 def _cmd_basins(args):
-    from ..basins._sweep import SweepSettings, basin_map
+    import time
+
+    from .._config import use_cpu_cores
+
+    n_cpu = use_cpu_cores(args.cpu_devices, strict=False)  # before any JAX computation
+    import jax
+
+    from ..basins._sweep import RESULTS, SweepSettings, basin_map
     from ..basins._wells import stable_wells
     from ..model._io import load_model
     from ..plots._basins import basin_figure, config_label
@@ -101,28 +123,46 @@ def _cmd_basins(args):
         lo, hi = (float(v) for v in args.x_range.split(":"))
     except ValueError:
         raise GMRInputError(f"--x-range must be LO:HI (write --x-range=-0.05:0.05), got {args.x_range!r}") from None
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+        raise GMRInputError(f"--x-range {args.x_range!r}: need finite LO < HI")
     wells = stable_wells(model, [[lo, hi]] * model.n_dof)
     if np.any(np.isnan(wells[:, 0])):
         raise GMRInputError(f"no stable equilibrium found in [{lo}, {hi}] for some DOF: widen --x-range")
+    x0 = _start(args.start, wells)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    settings = SweepSettings(settle_time=args.settle_time)
+    settings = SweepSettings(settle_time=args.settle_time, load=args.load, batching=args.batching,
+                             rtol=args.rtol, atol=args.atol)
     n = f.size * A.size
-    print(f"gmr basins: {n} points ({A.size} amplitudes x {f.size} frequencies), wells per DOF: "
-          f"{[np.round(w[~np.isnan(w)], 6).tolist() for w in wells]}")
-    rows = []
-    for k in range(A.size):  # one amplitude row per call: progress without recompiling
-        rows.append(basin_map(model, f, A[k:k + 1], wells, settings=settings, chunk=args.chunk))
-        done = int(40 * (k + 1) / A.size)
-        print(f"\r  [{'#' * done}{'.' * (40 - done)}] {k + 1}/{A.size}", end="", flush=True)
+    devs = jax.devices()
+    print(f"gmr basins: {n} points ({A.size} amplitudes x {f.size} frequencies), {args.load} half-sine (Eq. 25), "
+          f"wells per DOF: {[np.round(w[~np.isnan(w)], 6).tolist() for w in wells]}; "
+          f"{len(devs)} {devs[0].platform} device(s)" + (f" ({n_cpu} CPU cores)" if devs[0].platform == "cpu" else ""))
+    t0 = time.perf_counter()
+
+    def progress(done, total):
+        k = int(40 * done / total)
+        print(f"\r  [{'#' * k}{'.' * (40 - k)}] {done}/{total} points, {time.perf_counter() - t0:.0f} s",
+              end="", flush=True)
+
+    bm = basin_map(model, f, A, wells, x0=x0, settings=settings, chunk=args.chunk, progress=progress)
+    wall = time.perf_counter() - t0
     print()
-    cat = {key: np.concatenate([np.asarray(getattr(r, key)) for r in rows]) for key in
-           ("wells", "config", "result", "x_final", "v_final")}
+    cat = {key: np.asarray(getattr(bm, key)) for key in ("wells", "config", "result", "x_final", "v_final", "steps")}
     np.savez(out / "basins.npz", f=f, A=A, **cat)
-    basin_figure(f, A, cat["config"], model.n_dof, out / "basins.png")
+    basin_figure(f, A, cat["config"], model.n_dof, out / "basins.png",
+                 title=f"{Path(args.model).stem}: final configuration, {args.load} half-sine (Eq. 25)")
     vals, counts = np.unique(cat["config"], return_counts=True)
     for v, c in zip(vals, counts):
         print(f"  {config_label(int(v), model.n_dof):22s} {c:7d} points")
+    bad = cat["config"] < 0
+    if np.any(bad):
+        codes, cc = np.unique(cat["result"][bad], return_counts=True)
+        names = {getattr(RESULTS, m)._value: m.replace("_", " ")
+                 for m in ("successful", "not_settled", "diverged", "simulation_failed")}
+        why = ", ".join(f"{c} {names.get(int(k), 'code ' + str(int(k)))}" for k, c in zip(codes, cc))
+        print(f"  -1 (not classified): {why}")
+    print(f"{n} points in {wall:.1f} s ({n / wall:.0f} trajectories/s, compile included)")
     print(f"wrote {out}/basins.npz and basins.png")
     return 0
 
@@ -155,7 +195,18 @@ def build_parser():
     b.add_argument("--A", required=True, help="amplitudes START:STOP:NUM (force units)")
     b.add_argument("--x-range", default=None, help="LO:HI deformation interval to search for wells")
     b.add_argument("--settle-time", type=float, default=10.0, help="free time after the load (s)")
-    b.add_argument("--chunk", type=_positive_int, default=512, help="trajectories per lockstep batch")
+    b.add_argument("--load", choices=["tip", "base"], default="tip",
+                   help="tip: force A sin(2 pi f t) on the last mass (Eq. 25, default); base: the same half-sine "
+                   "as base acceleration (A in m/s^2)")
+    b.add_argument("--start", default=None, help="start configuration, e.g. 0-0-0-0-0 (default: every DOF in its "
+                   "first well)")
+    b.add_argument("--rtol", type=float, default=1e-6)
+    b.add_argument("--atol", type=float, default=1e-8)
+    b.add_argument("--batching", choices=["joint", "member"], default="joint",
+                   help="joint: each chunk as one ODE with a shared step (default, faster); member: one solve per point")
+    b.add_argument("--chunk", type=_positive_int, default=256, help="points integrated together")
+    b.add_argument("--cpu-devices", type=_positive_int, default=None,
+                   help="CPU cores to shard over (default: all; ignored on GPU/TPU)")
     b.add_argument("--out", required=True)
     b.set_defaults(fn=_cmd_basins)
     from ._discover import add_parser as _add_discover
@@ -164,7 +215,8 @@ def build_parser():
     from ._actuate import add_parser as _add_actuate
 
     _add_actuate(sub)
-    from ._refine import add_parser as _add_refine, run_refine as _run_refine
+    from ._refine import add_parser as _add_refine
+    from ._refine import run_refine as _run_refine
 
     _add_refine(sub, _run_refine)
     return p

@@ -8,9 +8,16 @@ once), so a fit, a sweep over thresholds (vmap) and a sweep over datasets (vmap)
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .._solution import RESULTS, Solution, error_if_failed
+
+
+def _float_array(x):
+    """Hyperparameters as float arrays (traced, so sweeps do not recompile); NumPy for plain
+    numbers, so that building default settings does not start a JAX backend at import."""
+    return x if isinstance(x, jax.Array) else np.asarray(x, float)
 
 
 class STLS(eqx.Module):
@@ -31,8 +38,8 @@ class STLS(eqx.Module):
     - `unbias`: refit without ridge on the final support.
     """
 
-    threshold: Float[Array, ""] = eqx.field(converter=lambda x: jnp.asarray(x, float), default=0.1)
-    alpha: Float[Array, ""] = eqx.field(converter=lambda x: jnp.asarray(x, float), default=0.05)
+    threshold: Float[Array, ""] = eqx.field(converter=_float_array, default=0.1)
+    alpha: Float[Array, ""] = eqx.field(converter=_float_array, default=0.05)
     max_iter: int = eqx.field(static=True, default=20)
     normalize_columns: bool = eqx.field(static=True, default=True)
     unbias: bool = eqx.field(static=True, default=True)

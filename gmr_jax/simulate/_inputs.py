@@ -79,6 +79,34 @@ class HalfSineTip(AbstractInput):
         return jnp.reshape(0.5 / jnp.asarray(self.frequency, float), (1,))
 
 
+class HalfSineBase(AbstractInput):
+    """Base-excitation variant of Eq. (25): base acceleration A sin(2π f t) for t <= 1/(2f),
+    then 0 (A in m/s²; the base is then left moving at constant velocity, which a chain of
+    relative deformations does not feel)."""
+
+    frequency: Float[Array, ""] | float
+    amplitude: Float[Array, ""] | float
+    n_dof: int = eqx.field(static=True, default=1)
+
+    def __call__(self, t):
+        on = t <= 0.5 / self.frequency
+        b = jnp.where(on, self.amplitude * jnp.sin(2 * jnp.pi * self.frequency * t), 0.0)
+        return b, jnp.zeros(self.n_dof)
+
+    def jump_times(self):
+        return jnp.reshape(0.5 / jnp.asarray(self.frequency, float), (1,))
+
+
+def half_sine(load: str, f, A, n_dof: int) -> AbstractInput:
+    """The Eq. (25) half-sine as an input: `load` "tip" (force on the last mass, `HalfSineTip`)
+    or "base" (base acceleration, `HalfSineBase`)."""
+    if load == "tip":
+        return HalfSineTip(f, A, n_dof=n_dof)
+    if load == "base":
+        return HalfSineBase(f, A, n_dof=n_dof)
+    raise ValueError(f"load must be 'tip' or 'base', got {load!r}")
+
+
 class Sampled(AbstractInput):
     """Measured inputs, linearly interpolated between samples (zero after the last)."""
 
