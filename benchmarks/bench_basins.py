@@ -5,22 +5,25 @@ Both sides integrate the same problem: chain topology, cell i with
 F_i(x, v) = k1_i x + k3_i x^3 + c v (k1_i < 0 < k3_i, graded along the chain), masses m, the
 paper's Eq. (25) tip load A sin(2 pi f t) for t <= 1/(2f) and 0 after, from rest in every cell's
 first well, up to t1 = 1/(2f) + settle_time, at rtol 1e-6 / atol 1e-8. gmr_jax uses Tsit5 with
-PID control and the switch-off time declared to the controller (its only method); scipy
-integrates in two pieces, [0, 1/(2f)] with the load and [1/(2f), t1] without, with RK45 and with
-DOP853. Both final states go through the same classifier (`gmr_jax.basins._sweep.classify`,
-vmapped) into wells and a configuration code.
+PID control and the switch-off time declared to the controller; scipy integrates in two pieces,
+[0, 1/(2f)] with the load and [1/(2f), t1] without, with RK45 and with DOP853. Both final states
+go through the same classifier (`gmr_jax.basins._sweep.classify`, vmapped) into wells and a
+configuration code.
+
+gmr_jax is measured three ways in the same run: the default sweep ("joint" batching: each chunk
+of 256 points integrated as one ODE) sharded over all CPU cores (`gmr.use_cpu_cores()`), the
+same on one core, and the previous method (`batching="member"`: `vmap` of one `diffeqsolve` per
+point) on one core.
 
 Measured:
 - scipy on a random subset of the grid (per point, both methods), the classification agreement
-  with the gmr_jax sweep on the same points, and the per-point speed ratio;
+  with the gmr_jax sweep on the same points, and the per-point speed ratios;
 - gmr_jax: compile time apart from run time (a cold call, then a warm call with different f/A
   values on a grid of the same size), throughput, cost vs grid size (1e2 .. 1e5 points, 5
-  cells), vs number of cells (3, 5, 10; 1e4 points) and vs `chunk` (256, 512, 1024), plus one
-  experiment with the points ordered by f (similar t1 in each lockstep chunk) through the
-  private `_sweep_points`, to size the lockstep cost.
+  cells), vs number of cells (3, 5, 10; 1e4 points) and vs `chunk`.
 
-    python benchmarks/bench_basins.py          # full: 3-8 min on a 2-core machine, by its load
-    python benchmarks/bench_basins.py --quick  # ~1 min: 1e2/1e3 grids, 50 scipy points/system
+    python benchmarks/bench_basins.py          # full: about 10 min on a 2-core machine
+    python benchmarks/bench_basins.py --quick  # ~2 min: 1e2/1e3 grids, 50 scipy points/system
 """
 
 import os
@@ -42,6 +45,8 @@ import scipy  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
 import gmr_jax as g  # noqa: E402  (enables float64)
+
+g.use_cpu_cores()  # every core a JAX CPU device (before any JAX computation)
 from gmr_jax.basins import _sweep  # noqa: E402
 from gmr_jax.basins._sweep import SweepSettings, basin_map, classify  # noqa: E402
 from gmr_jax.basins._wells import stable_wells  # noqa: E402
@@ -54,7 +59,8 @@ WELL = 0.03  # m: wells at x = ±WELL in every cell (k3 = -k1 / WELL^2)
 K1 = (8.0, 24.0)  # -k1 from the base cell to the tip cell, N/m
 F_RANGE = (0.1, 5.0)  # Hz
 A_RANGE = (0.02, 0.6)  # N
-SETTINGS = SweepSettings()  # settle_time 10 s, rtol 1e-6, atol 1e-8, x_tol 0.1, v_tol 0.05
+SETTINGS = SweepSettings()  # settle_time 10 s, rtol 1e-6, atol 1e-8, x_tol 0.1, v_tol 0.05, joint
+CHUNK = 256  # basin_map's default
 CELLS = (3, 5, 10)
 SCALING_CELLS = 5
 FC = 2.0 / (3.0 * np.sqrt(3.0))  # static snap-through load = FC * |k1| * WELL
@@ -143,9 +149,9 @@ def scipy_final(rhs, n, x0, f, amp, method):
     return y[:n], y[n:], ok, dt, dc, nfev
 
 
-def scipy_compare(n, wells, bm, n_points, rng, gmr_row):
+def scipy_compare(n, wells, bm, n_points, rng, gmr_rows):
     """scipy (both methods, interleaved) on random points of the map `bm`; classification
-    agreement with `bm` and timings."""
+    agreement with `bm` and timings; speed ratios against each gmr_jax mode in `gmr_rows`."""
     w = jnp.asarray(wells, float)
     span = jnp.nanmax(w, axis=1) - jnp.nanmin(w, axis=1)
     centre = np.asarray(0.5 * (jnp.nanmax(w, axis=1) + jnp.nanmin(w, axis=1)))
@@ -175,7 +181,8 @@ def scipy_compare(n, wells, bm, n_points, rng, gmr_row):
             r["t"].append(dt)
             r["cpu"].append(dc)
             r["nfev"].append(nfev)
-    row = {"n": n, "points": len(idx), "gmr_per": gmr_row["per"], "gmr_cpu": gmr_row["cpu_per"]}
+    row = {"n": n, "points": len(idx), "gmr_per": {m: r["per"] for m, r in gmr_rows.items()},
+           "gmr_cpu": gmr_rows["all cores"]["cpu_per"]}
     cfgs, disagreements = {}, []
     for meth, r in res.items():
         _, cfg, _ = cls(jnp.asarray(np.array(r["x"])), jnp.asarray(np.array(r["v"])),
@@ -183,7 +190,8 @@ def scipy_compare(n, wells, bm, n_points, rng, gmr_row):
         cfg = cfgs[meth] = np.asarray(cfg)
         t, cpu = np.array(r["t"]), np.array(r["cpu"])
         row[meth] = {"mean": t.mean(), "median": np.median(t), "nfev": float(np.mean(r["nfev"])),
-                     "agree": int(np.sum(cfg == gmr_cfg[idx])), "ratio": t.mean() / row["gmr_per"],
+                     "agree": int(np.sum(cfg == gmr_cfg[idx])),
+                     "ratio": {m: t.mean() / per for m, per in row["gmr_per"].items()},
                      "cpu_ratio": cpu.mean() / row["gmr_cpu"]}
         for j in np.nonzero(cfg != gmr_cfg[idx])[0]:
             k = idx[j]
@@ -193,71 +201,62 @@ def scipy_compare(n, wells, bm, n_points, rng, gmr_row):
     rk, dp = row["RK45"], row["DOP853"]
     print(f"  {n} cells: RK45 {1e3 * rk['mean']:.1f} ms/pt (agree {rk['agree']}/{len(idx)}), "
           f"DOP853 {1e3 * dp['mean']:.1f} ms/pt (agree {dp['agree']}/{len(idx)}), "
-          f"gmr {1e6 * row['gmr_per']:.0f} us/pt", flush=True)
+          f"gmr {1e6 * row['gmr_per']['all cores']:.0f} us/pt", flush=True)
     return row, disagreements
 
 
 # -------------------------------------------------------------------------------------------
 # gmr_jax side
-def run_map(model, wells, n_points, chunk, shift=0.0):
+def run_map(model, wells, n_points, chunk, shift=0.0, devices=None, batching="joint"):
     """One `basin_map` call: (map, wall s, CPU s of this process, all threads)."""
     f, a = grid(n_points, shift)
+    settings = eqx_replace(SETTINGS, batching)
     t, c = time.perf_counter(), time.process_time()
-    bm = basin_map(model, f, a, wells, settings=SETTINGS, chunk=chunk)
+    bm = basin_map(model, f, a, wells, settings=settings, chunk=chunk, devices=devices)
     jax.block_until_ready(bm)
     return bm, time.perf_counter() - t, time.process_time() - c
 
 
+def eqx_replace(settings, batching):
+    return settings if batching == settings.batching else SweepSettings(
+        settle_time=settings.settle_time, rtol=settings.rtol, atol=settings.atol, batching=batching)
+
+
 def cache_size():
-    return _sweep._sweep_points._cached._cache_size()
+    return _sweep.n_chunk_compiles() + sum(f._cached._cache_size() for f in _sharded_fns())
 
 
-def size_row(model, wells, n_points, chunk, label):
+def _sharded_fns():
+    return [_sweep._sharded(tuple(jax.devices()), c) for c in (128, 256, 512, 1024)] if len(jax.devices()) > 1 else []
+
+
+MODES = {  # label: (devices, batching)
+    "all cores": (None, "joint"),
+    "1 core": ("one", "joint"),
+    "1 core, member": ("one", "member"),
+}
+
+
+def size_row(model, wells, n_points, chunk, label, mode="all cores"):
     """Cold call (compile + run), then a warm call on a shifted grid of the same size."""
-    bm, t_cold, _ = run_map(model, wells, n_points, chunk)
+    devs, batching = MODES[mode]
+    devices = jax.devices()[:1] if devs == "one" else None
+    bm, t_cold, _ = run_map(model, wells, n_points, chunk, devices=devices, batching=batching)
     mid = cache_size()
-    bm2, t_warm, cpu_warm = run_map(model, wells, n_points, chunk, shift=0.5)
+    bm2, t_warm, cpu_warm = run_map(model, wells, n_points, chunk, shift=0.5, devices=devices, batching=batching)
     recompiled = cache_size() - mid
     n = int(np.prod(bm.config.shape))
     cfg = np.asarray(bm2.config)
-    row = {"label": label, "n": n, "shape": f"{cfg.shape[0]} x {cfg.shape[1]}", "chunk": chunk,
+    st = np.asarray(bm2.steps)
+    row = {"label": label, "mode": mode, "n": n, "shape": f"{cfg.shape[0]} x {cfg.shape[1]}", "chunk": chunk,
            "cold": t_cold, "warm": t_warm, "compile": t_cold - t_warm, "per": t_warm / n,
-           "cpu_per": cpu_warm / n, "tps": n / t_warm, "recompiled": recompiled,
+           "cpu_per": cpu_warm / n, "tps": n / t_warm, "recompiled": recompiled, "steps": float(st.mean()),
            "n_cfg": len(np.unique(cfg[cfg >= 0])), "unsettled": float(np.mean(cfg < 0)),
            "map": bm, "warm_map": bm2}
-    print(f"  {label}: {n} pts chunk {chunk}: cold {t_cold:.2f} s, warm {t_warm:.2f} s "
-          f"({1e6 * t_warm / n:.0f} us/traj), compile {t_cold - t_warm:.2f} s, "
+    print(f"  {label} [{mode}]: {n} pts chunk {chunk}: cold {t_cold:.2f} s, warm {t_warm:.2f} s "
+          f"({1e6 * t_warm / n:.0f} us/traj, {st.mean():.0f} steps), compile {t_cold - t_warm:.2f} s, "
           f"recompiled on warm call: {recompiled}", flush=True)
     return row
-
-
-def ordered_experiment(model, wells, n_points, chunk, reps=2):
-    """The warm grid's points through `_sweep_points`, in `basin_map`'s order (f varying
-    fastest) and sorted by f (similar t1 in each lockstep chunk), alternated `reps` times
-    each; the flat, padded point list is built as `basin_map` builds it on one device."""
-    f, a = grid(n_points, shift=0.5)
-    ff, aa = jnp.meshgrid(f, a)
-    flat_f, flat_a = ff.ravel(), aa.ravel()
-    n = flat_f.shape[0]
-    per = -(-n // chunk) * chunk if n > chunk else n
-    order = np.asarray(jnp.argsort(flat_f))
-    w = jnp.asarray(wells, float)
-    before = cache_size()
-    times, cfgs = {"grid": [], "sorted": []}, {}
-    for _ in range(reps):
-        for name, o in (("grid", np.arange(n)), ("sorted", order)):
-            sf = jnp.concatenate([flat_f[o], jnp.full(per - n, flat_f[0])])
-            sa = jnp.concatenate([flat_a[o], jnp.full(per - n, flat_a[0])])
-            t = time.perf_counter()
-            out = _sweep._sweep_points(model, SETTINGS, w[:, 0], sf, sa, w, min(chunk, per))
-            jax.block_until_ready(out)
-            times[name].append(time.perf_counter() - t)
-            cfg = np.empty(n, int)
-            cfg[o] = np.asarray(out[1])[:n]
-            cfgs[name] = cfg
-    same = int(np.sum(cfgs["grid"] == cfgs["sorted"]))
-    return {"grid": min(times["grid"]), "sorted": min(times["sorted"]), "same": same, "n": n,
-            "reps": reps, "compiled": cache_size() - before}
 
 
 # -------------------------------------------------------------------------------------------
@@ -286,8 +285,10 @@ def problem_text(map_size, n_scipy):
         f"{s.x_tol:g}·span and |v| < {s.v_tol:g}·span/s (span = {2 * WELL:g} m); configuration "
         "= bit i set when cell i ended in its second well, -1 when some cell has not settled.",
         "",
-        "gmr_jax: `basin_map` (Tsit5 + PID, switch-off time in `jump_ts`, divergence event, "
-        "vmapped in lockstep chunks through `lax.map(batch_size=chunk)`), one CPU device. "
+        "gmr_jax: `basin_map` (Tsit5 + PID, switch-off time declared to the controller, points "
+        f"ordered by (f, A), chunks of {CHUNK} points each integrated as one ODE whose error norm is "
+        "the largest member's RMS norm, so every member meets the tolerance it would meet alone; see "
+        "`gmr_jax/basins/_joint.py`), sharded with `shard_map` over the CPU devices. "
         "scipy: `solve_ivp` per point in two pieces, [0, 1/(2f)] and [1/(2f), t1] (the restart "
         "at the switch-off is scipy's equivalent of `jump_ts`), numpy right-hand side checked "
         "against `GlobalModel.accelerations`, no event (this hardening chain cannot diverge; "
@@ -295,7 +296,7 @@ def problem_text(map_size, n_scipy):
         "",
         f"scipy ran on {n_scipy} random points of each system's {map_size:,}-point grid (the "
         "same points for both methods, run interleaved point by point). gmr_jax per "
-        "trajectory = warm `basin_map` wall time over the whole grid / points (chunk 512). "
+        "trajectory = warm `basin_map` wall time over the whole grid / points. "
         "Speed ratio = scipy mean wall time per point / gmr_jax wall time per trajectory. "
         "Agreement = same configuration code as the gmr_jax map at the same (f, A).",
         "",
@@ -303,25 +304,29 @@ def problem_text(map_size, n_scipy):
 
 
 def compare_tables(cmp_rows, disagreements):
+    modes = list(MODES)
     out = [
         "## Per point: scipy vs gmr_jax", "",
-        "| cells | scipy points | gmr_jax (us/traj) | gmr_jax CPU (us/traj) | RK45 mean (ms) | "
-        "RK45 median (ms) | DOP853 mean (ms) | DOP853 median (ms) | ratio RK45 | ratio DOP853 | "
-        "CPU-time ratio RK45 | CPU-time ratio DOP853 |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| cells | scipy points | RK45 mean (ms) | DOP853 mean (ms) | "
+        + " | ".join(f"gmr_jax {m} (us/traj)" for m in modes) + " | "
+        + " | ".join(f"ratio RK45, {m}" for m in modes) + " | ratio DOP853, all cores | CPU-time ratio RK45 |",
+        "|---:|---:|---:|---:|" + "---:|" * (2 * len(modes) + 2),
     ]
     for r in cmp_rows:
         rk, dp = r["RK45"], r["DOP853"]
         out.append(
-            f"| {r['n']} | {r['points']} | {1e6 * r['gmr_per']:.0f} | {1e6 * r['gmr_cpu']:.0f} | "
-            f"{1e3 * rk['mean']:.1f} | {1e3 * rk['median']:.1f} | {1e3 * dp['mean']:.1f} | "
-            f"{1e3 * dp['median']:.1f} | **{rk['ratio']:.0f}x** | **{dp['ratio']:.0f}x** | "
-            f"{rk['cpu_ratio']:.0f}x | {dp['cpu_ratio']:.0f}x |")
+            f"| {r['n']} | {r['points']} | {1e3 * rk['mean']:.1f} | {1e3 * dp['mean']:.1f} | "
+            + " | ".join(f"{1e6 * r['gmr_per'][m]:.0f}" for m in modes) + " | "
+            + " | ".join(f"**{rk['ratio'][m]:.0f}x**" if m == "all cores" else f"{rk['ratio'][m]:.0f}x"
+                         for m in modes)
+            + f" | {dp['ratio']['all cores']:.0f}x | {rk['cpu_ratio']:.0f}x |")
     out += [
         "",
-        "CPU-time ratio: the same with process CPU seconds (all threads) on both sides: less "
-        "sensitive to other jobs on a shared machine, and it charges gmr_jax for any second "
-        "core XLA uses.",
+        "Ratio = scipy mean wall time per point / gmr_jax wall time per trajectory (warm call over the "
+        "whole grid). 'all cores': the default sweep sharded over every CPU core (`gmr.use_cpu_cores()`); "
+        "'1 core': the same on one device; '1 core, member': the earlier method (`batching=\"member\"`, "
+        "`vmap` of one `diffeqsolve` per point). CPU-time ratio: process CPU seconds on both sides (it charges "
+        "gmr_jax for every core it used; scipy uses one).",
         "",
         "| cells | scipy points | RK45 fevals/point | DOP853 fevals/point | agree RK45 | "
         "agree DOP853 | RK45 = DOP853 | gmr_jax unsettled on these points |",
@@ -350,15 +355,15 @@ def size_table(rows, title, note=None):
     if note:
         out += [note, ""]
     out += [
-        "| system | points | grid (A x f) | chunk | cold call (s) | warm call (s) | compile (s) | "
-        "us/traj | CPU us/traj | traj/s | recompiled on warm call | configs seen | unsettled |",
-        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| system | gmr_jax | points | grid (A x f) | chunk | cold call (s) | warm call (s) | compile (s) | "
+        "us/traj | CPU us/traj | traj/s | steps/traj | recompiled on warm call | configs seen | unsettled |",
+        "|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         out.append(
-            f"| {r['label']} | {r['n']:,} | {r['shape']} | {r['chunk']} | {fmt(r['cold'])} | "
+            f"| {r['label']} | {r['mode']} | {r['n']:,} | {r['shape']} | {r['chunk']} | {fmt(r['cold'])} | "
             f"{fmt(r['warm'])} | {fmt(r['compile'])} | {1e6 * r['per']:.0f} | "
-            f"{1e6 * r['cpu_per']:.0f} | {r['tps']:.0f} | {r['recompiled']} | {r['n_cfg']} | "
+            f"{1e6 * r['cpu_per']:.0f} | {r['tps']:.0f} | {r['steps']:.0f} | {r['recompiled']} | {r['n_cfg']} | "
             f"{100 * r['unsettled']:.1f} % |")
     return out + [""]
 
@@ -401,36 +406,40 @@ def main():
     m5, w5, lab5 = models[SCALING_CELLS], wells[SCALING_CELLS], f"{SCALING_CELLS} cells"
 
     print("gmr_jax: grid size", flush=True)
-    size_rows = [size_row(m5, w5, s, 512, lab5) for s in sizes]
-    base = size_rows[-1]  # map_size points, chunk 512
+    size_rows = [size_row(m5, w5, s, CHUNK, lab5) for s in sizes]
+    base = size_rows[-1]  # map_size points, all cores
     skipped_1e5 = None
     if not quick:
         predicted = 2 * 10 * base["warm"] + base["compile"]  # cold + warm call
         if predicted <= args.max_1e5_s:
-            size_rows.append(size_row(m5, w5, 100_000, 512, lab5))
+            size_rows.append(size_row(m5, w5, 100_000, CHUNK, lab5))
         else:
             skipped_1e5 = predicted
             print(f"  1e5 skipped (predicted {predicted:.0f} s)", flush=True)
 
-    print("gmr_jax: number of cells", flush=True)
-    cell_rows = [base if n == SCALING_CELLS else size_row(models[n], wells[n], map_size, 512,
-                                                          f"{n} cells") for n in CELLS]
+    print("gmr_jax: number of cells, three ways", flush=True)
+    cell_rows = {}  # (n, mode) -> row
+    for n in CELLS:
+        for mode in MODES:
+            if n == SCALING_CELLS and mode == "all cores":
+                cell_rows[n, mode] = base
+            else:
+                cell_rows[n, mode] = size_row(models[n], wells[n], map_size, CHUNK, f"{n} cells", mode)
 
     print("gmr_jax: chunk", flush=True)
-    chunk_rows = [size_row(m5, w5, map_size, c, lab5) for c in (256,)] + [base]
-    chunk_rows += [size_row(m5, w5, map_size, c, lab5) for c in (1024,)]
-    ordered = ordered_experiment(m5, w5, map_size, 512)
-    print(f"  lockstep: grid order {ordered['grid']:.2f} s, sorted by f {ordered['sorted']:.2f} s, "
-          f"same config {ordered['same']}/{ordered['n']}, compiled {ordered['compiled']}",
-          flush=True)
+    chunk_rows = [size_row(m5, w5, map_size, c, lab5) for c in (128,)] + [base]
+    chunk_rows += [size_row(m5, w5, map_size, c, lab5) for c in (512,)]
 
     print("scipy", flush=True)
     rng = np.random.default_rng(args.seed)
     cmp_rows, disagreements = [], []
-    for n, row in zip(CELLS, cell_rows, strict=True):
-        r, d = scipy_compare(n, wells[n], row["map"], n_scipy, rng, row)
+    for n in CELLS:
+        rows_n = {mode: cell_rows[n, mode] for mode in MODES}
+        r, d = scipy_compare(n, wells[n], rows_n["all cores"]["map"], n_scipy, rng, rows_n)
         cmp_rows.append(r)
         disagreements += d
+    same = {n: int(np.sum(np.asarray(cell_rows[n, "1 core, member"]["warm_map"].config)
+                          == np.asarray(cell_rows[n, "all cores"]["warm_map"].config))) for n in CELLS}
 
     total = time.perf_counter() - t_start
     load1 = os.getloadavg()
@@ -439,18 +448,21 @@ def main():
          f"Generated by `{cmd}` ({'quick' if quick else 'full'} run, {total:.0f} s in all).", ""]
     tot = sum(r["points"] for r in cmp_rows)
     agree = {m: sum(r[m]["agree"] for r in cmp_rows) for m in METHODS}
-    ratios = {m: ", ".join(f"{r[m]['ratio']:.0f}x" for r in cmp_rows) for m in METHODS}
+    ratios = {mode: ", ".join(f"{r['RK45']['ratio'][mode]:.0f}x" for r in cmp_rows) for mode in MODES}
+    head = [cell_rows[n, "all cores"] for n in CELLS]
     L += ["Summary: classification agreement with scipy "
           + ", ".join(f"{m} {agree[m]}/{tot}" for m in METHODS)
-          + f"; per-point speed ratio (scipy wall per point / gmr_jax wall per trajectory) for "
-          f"{', '.join(str(n) for n in CELLS)} cells: RK45 {ratios['RK45']}, DOP853 "
-          f"{ratios['DOP853']}; gmr_jax throughput at {map_size:,} points: "
-          + ", ".join(f"{r['tps']:.0f}" for r in cell_rows) + " trajectories/s; compile "
-          f"{min(r['compile'] for r in cell_rows):.1f}-{max(r['compile'] for r in cell_rows):.1f}"
-          " s per grid size and configuration.", ""]
+          + f"; per-point speed ratio vs scipy RK45 (scipy wall per point / gmr_jax wall per trajectory) for "
+          f"{', '.join(str(n) for n in CELLS)} cells: all cores {ratios['all cores']}; one core "
+          f"{ratios['1 core']}; earlier per-member vmap, one core {ratios['1 core, member']}. gmr_jax "
+          f"throughput at {map_size:,} points (all cores): "
+          + ", ".join(f"{r['tps']:.0f}" for r in head) + " trajectories/s; compile "
+          f"{min(r['compile'] for r in head):.1f}-{max(r['compile'] for r in head):.1f}"
+          " s per grid size and configuration. Joint and per-member batching give the same "
+          "configuration on " + ", ".join(f"{same[n]}/{map_size}" for n in CELLS) + " points.", ""]
     L += problem_text(map_size, n_scipy)
     L += compare_tables(cmp_rows, disagreements)
-    L += size_table(size_rows, f"gmr_jax: cost vs grid size ({lab5}, chunk 512)", SIZE_NOTE)
+    L += size_table(size_rows, f"gmr_jax: cost vs grid size ({lab5}, chunk {CHUNK}, all cores)", SIZE_NOTE)
     last = size_rows[-1]
     if skipped_1e5 is not None:
         L += [f"1e5 points skipped: predicted {skipped_1e5:.0f} s (cold + warm) > "
@@ -460,22 +472,13 @@ def main():
         L += [f"Quick run: 1e4 and 1e5 not run; linear extrapolation from {last['n']:,} "
               f"points: ~{1e4 * last['per']:.0f} s and ~{1e5 * last['per']:.0f} s per warm "
               "call.", ""]
-    L += size_table(cell_rows, f"gmr_jax: cost vs number of cells ({map_size:,} points, chunk 512)")
-    L += size_table(chunk_rows, f"gmr_jax: cost vs chunk ({lab5}, {map_size:,} points)")
-    o = ordered
-    L += [f"Lockstep experiment ({lab5}, chunk 512): the warm call's {o['n']:,} points through "
-          f"the private `_sweep_points` (new compilations: {o['compiled']}), in `basin_map`'s "
-          "order (f varying fastest, so every chunk holds the slowest, lowest-f points) and "
-          "sorted by f (each chunk holds similar t1 = 1/(2f) + "
-          f"{SETTINGS.settle_time:g} s), alternated, best of {o['reps']} each: "
-          f"{o['grid']:.2f} s ({1e6 * o['grid'] / o['n']:.0f} us/traj) in grid order vs "
-          f"{o['sorted']:.2f} s ({1e6 * o['sorted'] / o['n']:.0f} us/traj) sorted = "
-          f"{o['grid'] / o['sorted']:.2f}x; configurations identical on {o['same']}/{o['n']} "
-          "points.", ""]
+    L += size_table([cell_rows[n, mode] for n in CELLS for mode in MODES],
+                    f"gmr_jax: cost vs number of cells ({map_size:,} points, chunk {CHUNK})")
+    L += size_table(chunk_rows, f"gmr_jax: cost vs chunk ({lab5}, {map_size:,} points, all cores)")
     L += [f"Machine: {platform.machine()}, {os.cpu_count()} CPUs, load average {load0[0]:.2f} "
           f"at the start and {load1[0]:.2f} at the end (a shared machine: other jobs may run "
           "meanwhile, so absolute times are noisy). JAX "
-          f"{jax.__version__} on {jax.devices()[0].platform} ({len(jax.devices())} device), "
+          f"{jax.__version__} on {jax.devices()[0].platform} ({len(jax.devices())} devices), "
           f"diffrax {diffrax.__version__}, equinox {equinox.__version__}, scipy "
           f"{scipy.__version__}, numpy {np.__version__}, Python {platform.python_version()}, "
           f"EQX_ON_ERROR={os.environ['EQX_ON_ERROR']}, float64.", ""]

@@ -113,6 +113,9 @@ def main():
     p.add_argument("--amax", type=float, default=1.0)
     p.add_argument("--settle", type=float, default=20.0)
     p.add_argument("--model", default=None, help="also compare this gmr-model/1 file (e.g. a refined model)")
+    p.add_argument("--refine", action="store_true",
+                   help="also refine each seed's GMR model on five 6 s deployment runs of the truth (Eq. 25 "
+                   "from all folded, 60 dB; the points of refine_kresling.py) plus two 10 s sweeps, and compare it")
     args = p.parse_args()
     cmd = "python " + " ".join([Path(sys.argv[0]).as_posix()] + sys.argv[1:])
     t_start = time.perf_counter()
@@ -139,6 +142,21 @@ def main():
         gmr = g.reconstruct(recs, g.Library(5, 5)).model
         t_fit = time.perf_counter() - t0
         models.append((f"GMR, seed {seed}", gmr, t_fit, recs))
+        if args.refine:
+            from refine_kresling import DEPLOY_DURATION, DEPLOY_TRAIN, deployment
+
+            from gmr_jax.refine import RefineSettings, refine
+
+            train = [deployment(system.truth, fk, ak, DEPLOY_DURATION, seed=100 * seed + 10 + k)
+                     for k, (fk, ak) in enumerate(DEPLOY_TRAIN)]
+            train += g.make_recordings(system, args.amp, seed=1000 + seed, duration=10.0)
+            t0 = time.perf_counter()
+            sol = refine(gmr, train, settings=RefineSettings(window=1.0, stride=10, max_windows=6, max_steps=60),
+                         throw=False)
+            ok = g.RESULTS[sol.result] or "successful"
+            print(f"  refined seed {seed}: {ok}, {time.perf_counter() - t0:.0f} s", flush=True)
+            models.append((f"GMR refined on {len(DEPLOY_TRAIN)} deployment runs ({ok}), seed {seed}", sol.value,
+                           None, None))
         if seed == args.seeds[0]:
             models.append((f"GMC-SINDy(5,5), seed {seed}", g.gmc_sindy(recs, g.Library(5, 5)).model, None, recs))
     if args.model:
@@ -156,7 +174,7 @@ def main():
         print(f"{name}: agreement {agree:.2%} (predictable points {row['agree_pred']:.2%}), map {t_map:.0f} s; "
               f"disagreements {row['n_dis']}: {row['dist']}; restoring % "
               + ", ".join(f"{e:.2f}" for e in rest), flush=True)
-        if not first and name.startswith("GMR"):
+        if not first and name.startswith("GMR, "):
             first = {"name": name, "conf": conf}
 
     basin_figure(f, A, truth, 5, HERE / f"kresling_basins_{tag}_truth.png",
@@ -166,7 +184,8 @@ def main():
     difference_figure(f, A, truth, first["conf"], HERE / f"kresling_basins_{tag}_difference.png",
                       f"{first['name']} vs truth: {np.mean(first['conf'] == truth):.1%} agree")
 
-    gmr_rows = [r for r in rows if r["name"].startswith("GMR")]
+    gmr_rows = [r for r in rows if r["name"].startswith("GMR, ")]
+    ref_rows = [r for r in rows if r["name"].startswith("GMR refined")]
     lines = [
         f"# Kresling 5-cell deployment basins (damping ratio {args.zeta:g}): reconstructed models vs truth", "",
         f"Command: `{cmd}` ({time.perf_counter() - t_start:.0f} s on {len(jax.devices())} CPU devices). "
@@ -186,7 +205,9 @@ def main():
     ag = np.array([r["agree"] for r in gmr_rows])
     lines += [
         "",
-        f"GMR over {len(ag)} seed(s): agreement min {ag.min():.2%}, median {np.median(ag):.2%}, max {ag.max():.2%}.",
+        f"GMR over {len(ag)} seed(s): agreement min {ag.min():.2%}, median {np.median(ag):.2%}, max {ag.max():.2%}."
+        + (f" Refined: min {min(r['agree'] for r in ref_rows):.2%}, max {max(r['agree'] for r in ref_rows):.2%}."
+           if ref_rows else ""),
         "",
         "## How predictable is the truth's map?", "",
         "| truth compared with | agreement |", "|---|---:|",

@@ -182,3 +182,45 @@ def test_bad_inputs_name_the_problem(kwargs, match):
         basin_map(m, args["f"], args["A"], args["wells"], **extra)
     with pytest.raises(g.GMRInputError, match="load must be"):
         SweepSettings(load="top")
+
+
+def test_two_processes_with_jax_distributed_each_get_the_whole_map(tmp_path):
+    # multi-host scale-out through JAX's own runtime, run here as two CPU processes (gloo)
+    import socket
+    import subprocess
+    import sys
+    import textwrap
+
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        port = s.getsockname()[1]
+    code = textwrap.dedent(f"""
+        import sys
+        import jax
+        jax.config.update("jax_cpu_collectives_implementation", "gloo")
+        jax.distributed.initialize(coordinator_address="localhost:{port}", num_processes=2,
+                                   process_id=int(sys.argv[1]))
+        import numpy as np
+        import gmr_jax as g
+        terms = []
+        for i, (k1, k3) in enumerate([(-30.0, 1e5), (-60.0, 2e5)]):
+            terms += [{{"dof": i, "physics": "stiffness", "order": 1, "coefficient": k1}},
+                      {{"dof": i, "physics": "stiffness", "order": 3, "coefficient": k3}},
+                      {{"dof": i, "physics": "velocity_damping", "order": 1, "coefficient": 0.5}}]
+        m = g.from_terms([0.05, 0.05], terms, "chain")
+        w = g.stable_wells(m, [[-0.05, 0.05]] * 2)
+        assert jax.process_count() == 2 and len(jax.devices()) == 2
+        bm = g.basin_map(m, np.linspace(0.5, 4, 7), np.linspace(0.3, 2.5, 5), w, chunk=4)
+        np.save(sys.argv[2], np.asarray(bm.config))
+    """)
+    outs = [tmp_path / f"p{k}.npy" for k in range(2)]
+    procs = [subprocess.Popen([sys.executable, "-c", code, str(k), str(outs[k])], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for k in range(2)]
+    for p in procs:
+        _, err = p.communicate(timeout=300)
+        assert p.returncode == 0, err[-2000:]
+    m = chain()
+    one = basin_map(m, np.linspace(0.5, 4, 7), np.linspace(0.3, 2.5, 5), stable_wells(m, [[-0.05, 0.05]] * 2),
+                    chunk=4)
+    for o in outs:
+        assert np.array_equal(np.load(o), np.asarray(one.config))

@@ -257,13 +257,21 @@ def basin_map(
     # call c, device j, slot i holds sorted chunk (c * k + i) * nd + j: devices take turns
     layout = pad.reshape(calls, k, nd, chunk).transpose(0, 2, 1, 3).reshape(calls, -1)
     run = None if nd == 1 else _sharded(devices, chunk)
+    multi = jax.process_count() > 1 and run is not None
+    if multi:  # host values, identical in every process, are what a multi-process jit takes
+        model, settings_t, x0, wells = jax.tree.map(
+            lambda a: np.asarray(a) if eqx.is_array(a) else a, (model, settings_t, x0, wells))
     parts = []
     for c in range(calls):
-        fs, amps = jnp.asarray(flat_f[layout[c]]), jnp.asarray(flat_a[layout[c]])
+        fs, amps = flat_f[layout[c]], flat_a[layout[c]]  # NumPy: the same global input in every process
         if run is None:
-            out = _sweep_points(model, settings_t, x0, wells, fs, amps, chunk)
+            out = _sweep_points(model, settings_t, x0, wells, jnp.asarray(fs), jnp.asarray(amps), chunk)
         else:
             out = run(model, settings_t, x0, wells, fs, amps)
+        if multi:  # every process gets the whole map (jax.distributed)
+            from jax.experimental import multihost_utils
+
+            out = multihost_utils.process_allgather(out, tiled=True)
         parts.append(jax.tree.map(np.asarray, out))
         if progress is not None:
             progress(min(n, (c + 1) * k * nd * chunk), n)
