@@ -60,7 +60,7 @@ K1 = (8.0, 24.0)  # -k1 from the base cell to the tip cell, N/m
 F_RANGE = (0.1, 5.0)  # Hz
 A_RANGE = (0.02, 0.6)  # N
 SETTINGS = SweepSettings()  # settle_time 10 s, rtol 1e-6, atol 1e-8, x_tol 0.1, v_tol 0.05, joint
-CHUNK = 256  # basin_map's default
+CHUNK = None  # basin_map's default: _sweep.default_chunk(dof) = 512, 256, 128 for 3, 5, 10 cells
 CELLS = (3, 5, 10)
 SCALING_CELLS = 5
 FC = 2.0 / (3.0 * np.sqrt(3.0))  # static snap-through load = FC * |k1| * WELL
@@ -248,6 +248,7 @@ def size_row(model, wells, n_points, chunk, label, mode="all cores"):
     n = int(np.prod(bm.config.shape))
     cfg = np.asarray(bm2.config)
     st = np.asarray(bm2.steps)
+    chunk = _sweep.default_chunk(model.n_dof) if chunk is None else chunk
     row = {"label": label, "mode": mode, "n": n, "shape": f"{cfg.shape[0]} x {cfg.shape[1]}", "chunk": chunk,
            "cold": t_cold, "warm": t_warm, "compile": t_cold - t_warm, "per": t_warm / n,
            "cpu_per": cpu_warm / n, "tps": n / t_warm, "recompiled": recompiled, "steps": float(st.mean()),
@@ -286,7 +287,8 @@ def problem_text(map_size, n_scipy):
         "= bit i set when cell i ended in its second well, -1 when some cell has not settled.",
         "",
         "gmr_jax: `basin_map` (Tsit5 + PID, switch-off time declared to the controller, points "
-        f"ordered by (f, A), chunks of {CHUNK} points each integrated as one ODE whose error norm is "
+        "ordered by (f, A), chunks of `default_chunk(dof)` points (512, 256, 128 for 3, 5, 10 cells) each "
+        "integrated as one ODE whose error norm is "
         "the largest member's RMS norm, so every member meets the tolerance it would meet alone; see "
         "`gmr_jax/basins/_joint.py`), sharded with `shard_map` over the CPU devices. "
         "scipy: `solve_ivp` per point in two pieces, [0, 1/(2f)] and [1/(2f), t1] (the restart "
@@ -427,7 +429,7 @@ def main():
                 cell_rows[n, mode] = size_row(models[n], wells[n], map_size, CHUNK, f"{n} cells", mode)
 
     print("gmr_jax: chunk", flush=True)
-    chunk_rows = [size_row(m5, w5, map_size, c, lab5) for c in (128,)] + [base]
+    chunk_rows = [size_row(m5, w5, map_size, c, lab5) for c in (128,)] + [base]  # base: 256
     chunk_rows += [size_row(m5, w5, map_size, c, lab5) for c in (512,)]
 
     print("scipy", flush=True)
@@ -462,7 +464,7 @@ def main():
           "configuration on " + ", ".join(f"{same[n]}/{map_size}" for n in CELLS) + " points.", ""]
     L += problem_text(map_size, n_scipy)
     L += compare_tables(cmp_rows, disagreements)
-    L += size_table(size_rows, f"gmr_jax: cost vs grid size ({lab5}, chunk {CHUNK}, all cores)", SIZE_NOTE)
+    L += size_table(size_rows, f"gmr_jax: cost vs grid size ({lab5}, default chunk, all cores)", SIZE_NOTE)
     last = size_rows[-1]
     if skipped_1e5 is not None:
         L += [f"1e5 points skipped: predicted {skipped_1e5:.0f} s (cold + warm) > "
@@ -473,7 +475,7 @@ def main():
               f"points: ~{1e4 * last['per']:.0f} s and ~{1e5 * last['per']:.0f} s per warm "
               "call.", ""]
     L += size_table([cell_rows[n, mode] for n in CELLS for mode in MODES],
-                    f"gmr_jax: cost vs number of cells ({map_size:,} points, chunk {CHUNK})")
+                    f"gmr_jax: cost vs number of cells ({map_size:,} points, default chunk)")
     L += size_table(chunk_rows, f"gmr_jax: cost vs chunk ({lab5}, {map_size:,} points, all cores)")
     L += [f"Machine: {platform.machine()}, {os.cpu_count()} CPUs, load average {load0[0]:.2f} "
           f"at the start and {load1[0]:.2f} at the end (a shared machine: other jobs may run "

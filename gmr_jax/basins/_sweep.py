@@ -169,6 +169,12 @@ def _sharded(devices: tuple, chunk: int):
     return run
 
 
+def default_chunk(n_dof: int) -> int:
+    """Points per chunk: a power of two near 1280 / dof, within [64, 512] (measured on a CPU:
+    10 DOFs 240 us/point at 128 vs 261 at 256; 3 DOFs 42 at 512 vs 46 at 256)."""
+    return int(np.clip(2 ** round(np.log2(1280 / max(n_dof, 1))), 64, 512))
+
+
 def _traced(settings: SweepSettings) -> SweepSettings:
     """Every float setting as an array: new tolerances or settle times do not recompile."""
     return jax.tree.map(lambda v: jnp.asarray(v, float), settings)
@@ -209,7 +215,7 @@ def basin_map(
     *,
     x0: Float[ArrayLike, " dof"] | None = None,
     settings: SweepSettings = SweepSettings(),
-    chunk: int = 256,
+    chunk: int | None = None,
     devices=None,
     progress: Callable[[int, int], None] | None = None,
 ) -> BasinMap:
@@ -223,8 +229,10 @@ def basin_map(
     - `wells`: (dof, max_wells) stable equilibria per cell (`stable_wells`), ordered.
     - `x0`: start (default: every cell in its first well, at rest).
     - `settings`: `SweepSettings` (tolerances, settling, classification, load, batching).
-    - `chunk`: points integrated together; bounds memory for grids of 1e5-1e6 points. Points
-      are ordered by (f, A) before chunking, so each chunk holds similar actuations.
+    - `chunk`: points integrated together (default `default_chunk(dof)`: 512, 256, 128 points
+      for 3, 5, 10 DOFs, about 1280 state pairs, which keeps a chunk's stages in cache on a CPU;
+      on a GPU try thousands). Points are ordered by (f, A) before chunking, so each chunk holds
+      similar actuations. Memory is bounded for grids of 1e5-1e6 points.
     - `devices`: devices to shard the grid over (default: all of `jax.devices()`); chunks are
       dealt to a 1-D `shard_map` mesh in turn, so several CPU host devices, GPUs or TPUs (and
       several hosts after `jax.distributed.initialize()`) share the work evenly.
@@ -247,7 +255,10 @@ def basin_map(
     n = flat_f.size
     devices = tuple(jax.devices() if devices is None else devices)
     nd = len(devices)
-    chunk = max(1, min(int(chunk), -(-n // nd)))
+    chunk = default_chunk(model.n_dof) if chunk is None else int(chunk)
+    if chunk < 1:
+        raise GMRInputError(f"chunk must be >= 1, got {chunk}")
+    chunk = min(chunk, -(-n // nd))
     per_dev = -(-n // (chunk * nd))  # chunks per device
     calls = 1 if progress is None else min(per_dev, 20)
     k = -(-per_dev // calls)  # chunks per device per call

@@ -204,7 +204,8 @@ def build_parser():
     b.add_argument("--atol", type=float, default=1e-8)
     b.add_argument("--batching", choices=["joint", "member"], default="joint",
                    help="joint: each chunk as one ODE with a shared step (default, faster); member: one solve per point")
-    b.add_argument("--chunk", type=_positive_int, default=256, help="points integrated together")
+    b.add_argument("--chunk", type=_positive_int, default=None,
+                   help="points integrated together (default: about 1280 / DOFs, 64-512)")
     b.add_argument("--cpu-devices", type=_positive_int, default=None,
                    help="CPU cores to shard over (default: all; ignored on GPU/TPU)")
     b.add_argument("--out", required=True)
