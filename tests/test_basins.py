@@ -224,3 +224,18 @@ def test_two_processes_with_jax_distributed_each_get_the_whole_map(tmp_path):
                     chunk=4)
     for o in outs:
         assert np.array_equal(np.load(o), np.asarray(one.config))
+
+
+@pytest.mark.skipif("device_count" in __import__("os").environ.get("XLA_FLAGS", ""),
+                    reason="XLA_FLAGS already fixes the CPU device count")
+def test_use_cpu_cores_after_jax_started_is_a_clear_error():
+    jnp.zeros(1).block_until_ready()  # JAX has started in this process
+    with pytest.raises(g.GMRInputError, match="before the first JAX computation"):
+        g.use_cpu_cores(2)
+    assert g.use_cpu_cores(2, strict=False) == len(__import__("jax").devices("cpu"))
+
+
+def test_default_chunk_scales_with_the_number_of_cells():
+    from gmr_jax.basins._sweep import default_chunk
+
+    assert [default_chunk(d) for d in (1, 3, 5, 10, 40)] == [512, 512, 256, 128, 64]

@@ -200,3 +200,25 @@ def test_builder_rejects_impossible_geometry():
         kresling_chain([20.0], [0.04], h_folded=0.05, h_deployed=0.02)
     with pytest.raises(ValueError):
         KreslingCell(0.05, 0.02, 0.05, 1.0, 1.0, twist="helical")
+
+
+def test_closed_form_force_equals_autodiff_of_the_energy(chain):
+    for i in range(3):
+        cell = _cell(chain, i)
+        xs = jnp.linspace(-0.2, 1.2, 29) * float(cell.interwell)
+        closed = jax.vmap(cell.force)(xs)
+        auto = jax.vmap(jax.grad(cell.energy))(xs)
+        np.testing.assert_allclose(np.asarray(closed), np.asarray(auto), rtol=1e-12,
+                                   atol=1e-12 * float(jnp.max(jnp.abs(auto))))
+
+
+def test_accelerations_with_forces_on_every_mass(chain):
+    x = jnp.array([0.001, 0.015, 0.029])
+    v = jnp.array([0.01, -0.02, 0.03])
+    b = jnp.asarray(-0.2)
+    force = jnp.array([0.05, -0.1, 0.3])
+    a = chain.absolute_accelerations(chain.accelerations(x, v, b, force), b)
+    m = np.asarray(chain.masses)
+    ha = np.cumsum((m * np.asarray(a))[::-1])[::-1]  # (H a)_i = sum_{k>=i} m_k a_k
+    want = np.cumsum(np.asarray(force)[::-1])[::-1] - np.asarray(chain.force(x, v))
+    np.testing.assert_allclose(ha, want, atol=1e-12)
