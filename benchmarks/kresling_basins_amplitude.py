@@ -78,8 +78,11 @@ def main():
             row = run_one(f"GMR {amp * 1e3:g} mm seed {seed}", res.model, system, truth, dist, f, A, settings)
             row["r_i"] = [list(map(int, d.stats["r_i"])) for d in res.dofs]
             row["K_r"] = [int(d.stats["K_r"]) for d in res.dofs]
+            row["dropped"] = {i: d.stats["dropped_velocity_damping"] for i, d in enumerate(res.dofs)
+                              if d.stats["dropped_velocity_damping"]}
             runs.append(row)
             print(f"{row['name']}: {row['agree']:.2%} ({row['dist']}); local r_i {row['r_i']}, K_r {row['K_r']}; "
+                  f"unshared sgn(v)|v|^j dropped {row['dropped'] or 'none'}; "
                   "restoring % " + ", ".join(f"{e:.2f}" for e in row["rest"]), flush=True)
             if not args.no_gmc:
                 gm = g.gmc_sindy(recs, g.Library(5, 5)).model
@@ -114,14 +117,15 @@ def main():
     lines += ["", "## Every run", "",
               "| run | agreement | disagreements: distance to a truth boundary (cells) | unsettled | "
               "local restoring orders r_i (folded, deployed) per cell | global degree K_r per cell | "
-              "restoring error per cell (%) |",
-              "|---|---:|---|---:|---|---|---|"]
+              "restoring error per cell (%) | unshared damping orders j dropped (cell: j) |",
+              "|---|---:|---|---:|---|---|---|---|"]
     for b in by_amp:
         for r in b["runs"] + b["gmc"]:
             orders = " ; ".join(f"{a},{c}" for a, c in r["r_i"]) if "r_i" in r else "-"
             degrees = ", ".join(map(str, r["K_r"])) if "K_r" in r else "-"
+            dropped = "; ".join(f"{i + 1}: {j}" for i, j in r["dropped"].items()) if r.get("dropped") else "-"
             lines.append(f"| {r['name']} | {r['agree']:.2%} | {r['dist']} | {r['unsettled']:.2%} | {orders} | "
-                         f"{degrees} | " + ", ".join(f"{e:.2f}" for e in r["rest"]) + " |")
+                         f"{degrees} | " + ", ".join(f"{e:.2f}" for e in r["rest"]) + f" | {dropped} |")
     lines += ["", f"Truth map: {len(np.unique(truth))} configurations, {t_truth:.0f} s; cells numbered from the base "
               f"({n_dof} cells)."]
     text = "\n".join(lines) + "\n"

@@ -87,3 +87,34 @@ def test_keep_exempts_terms_from_the_threshold():
     kept = g.fit_local(x, v, y, lib, solver, None, keep=keep).value
     assert abs(float(kept.coef[i_xv]) - 20.0) < 0.01
     assert 0 < float(kept.covariance[i_xv, i_xv]) < 1e-5
+
+
+def test_unshared_velocity_damping_mask():
+    lib = g.Library(3, 3)
+    terms = lib.terms()
+    coef = np.zeros((2, lib.n_terms))
+    col = {t: i for i, t in enumerate(terms)}
+    coef[:, col[("velocity_damping", 1)]] = 0.3  # viscous: part of C(x) v, never judged here
+    coef[0, col[("velocity_damping", 3)]] = 5.0  # v^3 at one well only: not shared
+    coef[:, col[("velocity_damping", 2)]] = 1.0  # v|v| at both wells: shared
+    coef[0, col[("position_damping", 1)]] = 2.0  # x v differs by well legitimately
+    mask = g._reconstruct.velocity_terms_not_shared(coef, lib)
+    assert [t for t, m in zip(terms, mask) if m] == [("velocity_damping", 3)]
+
+
+def test_damping_terms_found_at_one_well_only_are_dropped():
+    """Kresling chain (damping ratio 0.2, 0.75 mm, seed 4): the base cell's folded-well fit
+    selects v|v|, v^3, v^3|v| (each > 3 sigma) in place of the unselected x^2 v; averaged by
+    Eq. (21) they put 8 % error on the global damping. The sharing rule removes them."""
+    system = g.kresling5(damping_ratio=0.2)
+    recs = g.make_recordings(system, 7.5e-4, snr_db=60.0, seed=4)
+    box = system.x_range[0], system.v_range[0]
+    raw = g.reconstruct(recs, g.Library(5, 5), shared_damping=False)
+    assert damping_error(raw.model, system.truth, 0, *box) > 0.05
+    res = g.reconstruct(recs, g.Library(5, 5))
+    assert res.dofs[0].stats["dropped_velocity_damping"] == [2, 3, 4]
+    assert damping_error(res.model, system.truth, 0, *box) < 0.005
+    assert np.all(res.model.velocity_damping[:, 2:] == 0)
+    for i in range(1, 5):  # cells where every well agrees are untouched
+        assert res.dofs[i].stats["dropped_velocity_damping"] == []
+        np.testing.assert_array_equal(res.dofs[i].local_coef, raw.dofs[i].local_coef)

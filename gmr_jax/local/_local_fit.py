@@ -44,6 +44,7 @@ def fit_local(
     *,
     weights: Float[Array, " samples"] | None = None,
     keep: Bool[Array, " terms"] | None = None,
+    support: Bool[Array, " terms"] | None = None,
     throw: bool = True,
 ) -> Solution:
     """Fit the local model of one equilibrium (Algorithm 1, steps 1.1-1.4).
@@ -53,7 +54,9 @@ def fit_local(
     the DOF: input force minus (H a) (Eq. 9). With `select`, the threshold is chosen by
     cross-validation; otherwise `solver.threshold` is used. Terms flagged in `keep` are never
     thresholded away: after STLS the model is refitted (least squares, no ridge) on the STLS
-    support plus `keep`.
+    support plus `keep`. `support` restricts the fit to the flagged terms (default: the whole
+    library); it bounds `keep` too (with `select`, the threshold is still chosen on the whole
+    library).
 
     **Returns:** a `Solution` whose value is a `LocalFit`.
     """
@@ -68,10 +71,11 @@ def fit_local(
     else:
         cv = {}
     qr = compress(theta, y, weights)
-    sol = stls_qr(qr, solver)
+    sol = stls_qr(qr, solver, initial_mask=support)
     if keep is not None:
         refit = eqx.tree_at(lambda s: (s.threshold, s.alpha), solver, (jnp.zeros(()), jnp.zeros(())))
-        sol = stls_qr(qr, refit, initial_mask=sol.stats["support"] | keep)
+        mask = sol.stats["support"] | keep
+        sol = stls_qr(qr, refit, initial_mask=mask if support is None else mask & support)
     cov = coefficient_covariance(qr, sol.value, sol.stats["support"])
     fit = LocalFit(
         equilibrium=xe,
