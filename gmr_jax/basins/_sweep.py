@@ -232,7 +232,9 @@ def basin_map(
     - `chunk`: points integrated together (default `default_chunk(dof)`: 512, 256, 128 points
       for 3, 5, 10 DOFs, about 1280 state pairs, which keeps a chunk's stages in cache on a CPU;
       on a GPU try thousands). Points are ordered by (f, A) before chunking, so each chunk holds
-      similar actuations. Memory is bounded for grids of 1e5-1e6 points.
+      similar actuations. The integrator's memory is per chunk; what grows with the
+      grid is the returned map and its copies, about 0.6-0.7 kB per point at peak (1e6 points:
+      1.1 GB in all, `benchmarks/results_basins_memory.md`).
     - `devices`: devices to shard the grid over (default: all of `jax.devices()`); chunks are
       dealt to a 1-D `shard_map` mesh in turn, so several CPU host devices, GPUs or TPUs (and
       several hosts after `jax.distributed.initialize()`) share the work evenly.
