@@ -156,28 +156,28 @@ def _fit_wells(xs, vs, ys, w, library, solver, select, keep=None):
 def velocity_terms_not_shared(coef: np.ndarray, library: Library) -> np.ndarray:
     """Mask of the position-independent damping terms sgn(v)|v|^j, j != 1, that some wells'
     local fits selected and others did not (`coef`: (wells, terms))."""
-    nonzero = np.asarray(coef) != 0
+    nonzero = coef != 0
     vd = np.array([phys == VELOCITY_DAMPING and k != 1 for phys, k in library.terms()])
     return vd & np.any(nonzero, axis=0) & ~np.all(nonzero, axis=0)
 
 
-def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_sigma):
+def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_sigma, dof):
     """Drop the position-independent damping terms not selected at every well and refit the
     wells that had them (on their support less those terms, at their own threshold), until
     every remaining term is shared. Returns the fits and the dropped orders j."""
     dropped = []
-    while np.any(drop := velocity_terms_not_shared(fits.coef, library)):
-        coef = np.asarray(fits.coef)
+    while np.any(drop := velocity_terms_not_shared(coef := np.asarray(fits.coef), library)):
         for k in np.nonzero(np.any((coef != 0) & drop[None, :], axis=1))[0]:
             slv = eqx.tree_at(lambda s: s.threshold, solver, fits.threshold[k])
             sol = fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=keep,
                             support=jnp.asarray((coef[k] != 0) & ~drop), throw=False)
             if sol.result != RESULTS.successful:
-                raise GMRInputError(f"well {k}: refit without unshared damping terms failed: {RESULTS[sol.result]}")
+                raise GMRInputError(f"DOF {dof}, well {k}: refit without unshared damping terms failed: "
+                                    f"{RESULTS[sol.result]}")
             new = jax.tree.map(lambda a: a[None], sol.value)
             if screen_sigma is not None:
                 new = _screen(new, screen_sigma)
-            fits = jax.tree.map(lambda a, b: a.at[k].set(b[0]), fits, new)
+            fits = jax.tree.map(lambda a, b, k=k: a.at[k].set(b[0]), fits, new)
         dropped += [k for (_, k), d in zip(library.terms(), drop) if d]
     return fits, sorted(dropped)
 
@@ -233,7 +233,7 @@ def reconstruct(
       the wells that had it are refitted without it (reported in `dofs[i].stats`). Typical
       cause: an unselected x^2 v standing in as a cancelling v|v|, v^3, v^3|v| combination,
       harmless inside the well, far off at deployment speeds (Kresling chain, 0.75 mm, seed 4:
-      base-cell damping error 8.3 % -> 0.1 %, basin agreement 60.7 % -> 95 %; RESULTS.md).
+      base-cell damping error 8.3 % -> 0.19 %, basin agreement 60.7 % -> 94.6 %; RESULTS.md).
 
     **Returns:** a `Reconstruction` with the `GlobalModel` (standard errors attached) and per-DOF
     reports (equilibria, local coefficients, global orders, condition numbers).
@@ -259,9 +259,9 @@ def reconstruct(
         xs, w = _pad_stack([[recs[k].x[:, i] for k in g] for g in groups])
         vs, _ = _pad_stack([[recs[k].v[:, i] for k in g] for g in groups])
         ys, _ = _pad_stack([[targets[k][:, i] for k in g] for g in groups])
+        xs, vs, ys, w = (jnp.asarray(a) for a in (xs, vs, ys, w))
         keep = jnp.asarray(low_order_terms(library, keep_restoring_order)) if keep_low_orders else None
-        sols = _fit_wells(jnp.asarray(xs), jnp.asarray(vs), jnp.asarray(ys), jnp.asarray(w), library, solver,
-                          select, keep)
+        sols = _fit_wells(xs, vs, ys, w, library, solver, select, keep)
         fits: LocalFit = sols.value
         if screen_sigma is not None:
             fits = _screen(fits, screen_sigma)
@@ -271,11 +271,7 @@ def reconstruct(
             raise GMRInputError(f"DOF {i}, well {k}: local fit failed: {RESULTS[sols.result[k]]}")
         dropped = []
         if shared_damping:
-            try:
-                fits, dropped = _share_velocity_damping(fits, jnp.asarray(xs), jnp.asarray(vs), jnp.asarray(ys),
-                                                        jnp.asarray(w), library, solver, keep, screen_sigma)
-            except GMRInputError as e:
-                raise GMRInputError(f"DOF {i}, {e}") from None
+            fits, dropped = _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_sigma, i)
         coord = coordinate(fits, library, method=coordination, throw=False)
         if coord.result != RESULTS.successful:
             raise GMRInputError(
