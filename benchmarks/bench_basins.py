@@ -7,8 +7,8 @@ paper's Eq. (25) tip load A sin(2 pi f t) for t <= 1/(2f) and 0 after, from rest
 first well, up to t1 = 1/(2f) + settle_time, at rtol 1e-6 / atol 1e-8. gmr_jax uses Tsit5 with
 PID control and the switch-off time declared to the controller; scipy integrates in two pieces,
 [0, 1/(2f)] with the load and [1/(2f), t1] without, with RK45 and with DOP853. Both final states
-go through the same classifier (`gmr_jax.basins._sweep.classify`, vmapped) into wells and a
-configuration code.
+go through the same classification rule (`basin_map`'s, written out in `classify` here, vmapped)
+into wells and a configuration code.
 
 gmr_jax is measured three ways in the same run: the default sweep ("joint" batching: each chunk
 of 256 points integrated as one ODE) sharded over all CPU cores (`gmr.use_cpu_cores()`), the
@@ -47,9 +47,9 @@ from scipy.integrate import solve_ivp  # noqa: E402
 import gmr_jax as g  # noqa: E402  (enables float64)
 
 g.use_cpu_cores()  # every core a JAX CPU device (before any JAX computation)
-from gmr_jax.basins import _sweep  # noqa: E402
-from gmr_jax.basins._sweep import SweepSettings, basin_map, classify  # noqa: E402
-from gmr_jax.basins._wells import stable_wells  # noqa: E402
+from gmr_jax import SweepSettings, basin_map, stable_wells  # noqa: E402
+
+RESULTS = Path(__file__).resolve().parents[1] / "results"
 
 # -------------------------------------------------------------------------------------------
 # Systems: n-cell chains, stiffness graded linearly from the base (softest) to the tip.
@@ -60,12 +60,52 @@ K1 = (8.0, 24.0)  # -k1 from the base cell to the tip cell, N/m
 F_RANGE = (0.1, 5.0)  # Hz
 A_RANGE = (0.02, 0.6)  # N
 SETTINGS = SweepSettings()  # settle_time 10 s, rtol 1e-6, atol 1e-8, x_tol 0.1, v_tol 0.05, joint
-CHUNK = None  # basin_map's default: _sweep.default_chunk(dof) = 512, 256, 128 for 3, 5, 10 cells
+CHUNK = None  # basin_map's default: default_chunk(dof) = 512, 256, 128 for 3, 5, 10 cells
 CELLS = (3, 5, 10)
 SCALING_CELLS = 5
 FC = 2.0 / (3.0 * np.sqrt(3.0))  # static snap-through load = FC * |k1| * WELL
 METHODS = ("RK45", "DOP853")
 GRID_SHAPES = {100: (10, 10), 1000: (40, 25), 10_000: (100, 100), 100_000: (400, 250)}  # (nf, na)
+
+
+def default_chunk(n_dof: int) -> int:
+    """`basin_map`'s default points per chunk: a power of two near 1280 / dof, within [64, 512]."""
+    return int(np.clip(2 ** round(np.log2(1280 / max(n_dof, 1))), 64, 512))
+
+
+def classify(x1, v1, code, wells, span, settings: SweepSettings):
+    """`basin_map`'s classification of one final state (`SweepSettings` docstring): well index
+    per cell (-1: not settled, failed, diverged) and the configuration (bit i = cell i in its
+    second well; -1 unless every cell settled); a successful solve that did not settle becomes
+    `not_settled`."""
+    ok, not_settled = g.RESULTS.successful._value, g.RESULTS.not_settled._value
+    dist = jnp.abs(x1[:, None] - wells)  # (dof, max_wells)
+    dist = jnp.where(jnp.isnan(wells), jnp.inf, dist)
+    k = jnp.argmin(dist, axis=1)
+    near = jnp.min(dist, axis=1) < settings.x_tol * span
+    slow = jnp.abs(v1) < settings.v_tol * span
+    settled = near & slow & jnp.isfinite(x1)
+    good = code == ok
+    idx = jnp.where(settled & good, k, -1)
+    code = jnp.where(good & ~jnp.all(settled), not_settled, code)
+    bits = jnp.sum(jnp.where(idx == 1, 2 ** jnp.arange(idx.shape[0]), 0))
+    return idx, jnp.where(jnp.all(idx >= 0), bits, -1), code
+
+
+class CompileCounter:
+    """Number of XLA backend compilations so far (JAX's monitoring events): a warm call that
+    compiles nothing leaves it unchanged."""
+
+    def __init__(self):
+        self.n = 0
+        jax.monitoring.register_event_duration_secs_listener(self._event)
+
+    def _event(self, event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            self.n += 1
+
+
+COMPILES = CompileCounter()
 
 
 def chain_coefficients(n):
@@ -136,7 +176,7 @@ def scipy_final(rhs, n, x0, f, amp, method):
     t_off = 0.5 / f
     t1 = t_off + SETTINGS.settle_time
     y0 = np.concatenate([x0, np.zeros(n)])
-    kw = {"method": method, "rtol": SETTINGS.rtol, "atol": SETTINGS.atol}
+    kw = {"method": method, "rtol": SETTINGS.integrator.rtol, "atol": SETTINGS.integrator.atol}
     t, c = time.perf_counter(), time.process_time()
     s1 = solve_ivp(rhs, (0.0, t_off), y0, args=(f, amp, True), **kw)
     s2 = None
@@ -170,7 +210,7 @@ def scipy_compare(n, wells, bm, n_points, rng, gmr_rows):
     for k in idx:
         for meth in METHODS:  # interleaved: both methods see the same machine load
             x1, v1, ok, dt, dc, nfev = scipy_final(rhs, n, x0, float(ff[k]), float(aa[k]), meth)
-            far = np.max(np.abs(x1 - centre) / np.asarray(span)) > SETTINGS.bound
+            far = np.max(np.abs(x1 - centre) / np.asarray(span)) > SETTINGS.box_spans
             code = g.RESULTS.simulation_failed
             if ok:
                 code = g.RESULTS.diverged if far else g.RESULTS.successful
@@ -212,22 +252,14 @@ def run_map(model, wells, n_points, chunk, shift=0.0, devices=None, batching="jo
     f, a = grid(n_points, shift)
     settings = eqx_replace(SETTINGS, batching)
     t, c = time.perf_counter(), time.process_time()
-    bm = basin_map(model, f, a, wells, settings=settings, chunk=chunk, devices=devices)
+    bm = basin_map(model, f, a, wells, settings=settings, chunk=chunk, devices=devices).value
     jax.block_until_ready(bm)
     return bm, time.perf_counter() - t, time.process_time() - c
 
 
 def eqx_replace(settings, batching):
     return settings if batching == settings.batching else SweepSettings(
-        settle_time=settings.settle_time, rtol=settings.rtol, atol=settings.atol, batching=batching)
-
-
-def cache_size():
-    return _sweep.n_chunk_compiles() + sum(f._cached._cache_size() for f in _sharded_fns())
-
-
-def _sharded_fns():
-    return [_sweep._sharded(tuple(jax.devices()), c) for c in (128, 256, 512, 1024)] if len(jax.devices()) > 1 else []
+        settle_time=settings.settle_time, integrator=settings.integrator, batching=batching)
 
 
 MODES = {  # label: (devices, batching)
@@ -242,13 +274,13 @@ def size_row(model, wells, n_points, chunk, label, mode="all cores"):
     devs, batching = MODES[mode]
     devices = jax.devices()[:1] if devs == "one" else None
     bm, t_cold, _ = run_map(model, wells, n_points, chunk, devices=devices, batching=batching)
-    mid = cache_size()
+    mid = COMPILES.n
     bm2, t_warm, cpu_warm = run_map(model, wells, n_points, chunk, shift=0.5, devices=devices, batching=batching)
-    recompiled = cache_size() - mid
+    recompiled = COMPILES.n - mid
     n = int(np.prod(bm.config.shape))
     cfg = np.asarray(bm2.config)
     st = np.asarray(bm2.steps)
-    chunk = _sweep.default_chunk(model.n_dof) if chunk is None else chunk
+    chunk = default_chunk(model.n_dof) if chunk is None else chunk
     row = {"label": label, "mode": mode, "n": n, "shape": f"{cfg.shape[0]} x {cfg.shape[1]}", "chunk": chunk,
            "cold": t_cold, "warm": t_warm, "compile": t_cold - t_warm, "per": t_warm / n,
            "cpu_per": cpu_warm / n, "tps": n / t_warm, "recompiled": recompiled, "steps": float(st.mean()),
@@ -281,8 +313,8 @@ def problem_text(map_size, n_scipy):
         "A sin(2πft) for t <= 1/(2f), then 0, on the last mass; start at rest with every cell "
         f"in its first well (x = -{WELL:g}). Grid: f linear in [{F_RANGE[0]:g}, {F_RANGE[1]:g}] "
         f"Hz, A linear in [{A_RANGE[0]:g}, {A_RANGE[1]:g}] N; t1 = 1/(2f) + "
-        f"{s.settle_time:g} s; rtol {s.rtol:g}, atol {s.atol:g}. Classification, both sides "
-        "through `gmr_jax.basins._sweep.classify`: a cell is in a well when |x - x_well| < "
+        f"{s.settle_time:g} s; rtol {s.integrator.rtol:g}, atol {s.integrator.atol:g}. Classification, "
+        "both sides by `basin_map`'s rule: a cell is in a well when |x - x_well| < "
         f"{s.x_tol:g}·span and |v| < {s.v_tol:g}·span/s (span = {2 * WELL:g} m); configuration "
         "= bit i set when cell i ended in its second well, -1 when some cell has not settled.",
         "",
@@ -290,7 +322,7 @@ def problem_text(map_size, n_scipy):
         "ordered by (f, A), chunks of `default_chunk(dof)` points (512, 256, 128 for 3, 5, 10 cells) each "
         "integrated as one ODE whose error norm is "
         "the largest member's RMS norm, so every member meets the tolerance it would meet alone; see "
-        "`gmr_jax/basins/_joint.py`), sharded with `shard_map` over the CPU devices. "
+        "`SweepSettings.batching`), sharded with `shard_map` over the CPU devices. "
         "scipy: `solve_ivp` per point in two pieces, [0, 1/(2f)] and [1/(2f), t1] (the restart "
         "at the switch-off is scipy's equivalent of `jump_ts`), numpy right-hand side checked "
         "against `GlobalModel.accelerations`, no event (this hardening chain cannot diverge; "
@@ -373,7 +405,8 @@ def size_table(rows, title, note=None):
 SIZE_NOTE = (
     "Cold call = first `basin_map` call at that size (trace + compile + run); warm call = a "
     "second call on a grid of the same size with every f and A value moved (both ends inwards "
-    "by half a grid step); no recompile on the warm call (checked on the jit cache); compile = "
+    "by half a grid step); no recompile on the warm call (checked: XLA compilations during the warm "
+    "call, counted with `jax.monitoring`); compile = "
     "cold - warm (on the largest grids the compile is within the run-to-run noise of the two "
     "calls). CPU us/traj: process CPU time of the warm call (all threads) per trajectory. "
     "'configs seen' and 'unsettled' are read off the warm call's map.")
@@ -389,9 +422,9 @@ def main():
     p.add_argument("--max-1e5-s", type=float, default=300.0,
                    help="run the 1e5 grid (cold + warm call) only when predicted below this (s)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", default="benchmarks/results_basins.md")
+    p.add_argument("--out", default=str(RESULTS / "bench_basins.md"))
     args = p.parse_args()
-    cmd = "python " + " ".join(sys.argv)
+    cmd = " ".join(["python benchmarks/bench_basins.py"] + sys.argv[1:])
     quick = args.quick
     n_scipy = args.scipy_points or (50 if quick else 200)
     map_size = 1000 if quick else 10_000  # grid of the per-cell rows and the scipy comparison

@@ -7,7 +7,7 @@ time (compile included), peak resident memory of the process, and the part of it
 returned map itself (`BasinMap` arrays).
 
 Run: python benchmarks/bench_basins_memory.py [--sizes 10000 100000 1000000]
-Writes benchmarks/results_basins_memory.md.
+Writes results/bench_basins_memory.md.
 """
 
 import argparse
@@ -20,7 +20,8 @@ import sys
 import time
 from pathlib import Path
 
-HERE = Path(__file__).parent
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE.parent / "results"
 
 
 def child(n_points: int, blocks: bool):
@@ -41,7 +42,7 @@ def child(n_points: int, blocks: bool):
     f = np.linspace(*F_RANGE, nf)
     a = np.linspace(*A_RANGE, n_points // nf)
     t = time.perf_counter()
-    bm = g.basin_map(model, f, a, wells, settings=SETTINGS, progress=(lambda d, n: None) if blocks else None)
+    bm = g.basin_map(model, f, a, wells, settings=SETTINGS, progress=(lambda d, n: None) if blocks else None).value
     jax.block_until_ready(bm)
     wall = time.perf_counter() - t
     out_mb = sum(np.asarray(x).nbytes for x in jax.tree.leaves(bm)) / 2**20
@@ -52,10 +53,11 @@ def child(n_points: int, blocks: bool):
 
 
 def main():
-    p = argparse.ArgumentParser()
+    p = argparse.ArgumentParser(description="Memory of a basin sweep vs grid size")
     p.add_argument("--sizes", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
-    p.add_argument("--child", type=int, default=None)
-    p.add_argument("--blocks", action="store_true")
+    p.add_argument("--out", default=str(RESULTS / "bench_basins_memory.md"))
+    p.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--blocks", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.child is not None:
         child(args.child, args.blocks)
@@ -75,7 +77,7 @@ def main():
         "progress=None)`; 'blocks': with a progress callback (up to ~20 calls of one compiled function, "
         "as `gmr basins` runs). Peak RSS includes the Python/JAX runtime (the start value) and the "
         "returned map. Wall times are cold single calls on the shared 2-core dev machine: a memory "
-        "measurement, not the speed benchmark (that is `results_basins.md`, warm calls, side by side with "
+        "measurement, not the speed benchmark (that is `bench_basins.md`, warm calls, side by side with "
         "scipy).", "",
         "| points | mode | wall incl. compile (s) | us/point | peak RSS (MB) | RSS at start (MB) | "
         "returned map (MB) | peak - start - map (MB) | unclassified |",
@@ -88,13 +90,15 @@ def main():
                      f"{r['map_mb']:.0f} | {extra:.0f} | {r['unclassified']:.2%} |")
     per_point = [(b["rss_peak_mb"] - a["rss_peak_mb"]) * 1024 / (b["points"] - a["points"])
                  for a, b in zip(rows, rows[2:]) if b["points"] > a["points"]]
-    lines += ["", f"Growth of the peak per extra point: {min(per_point):.2f}-{max(per_point):.2f} kB (the returned "
-              "map is 0.14 kB per point; the rest is its transient copies on the way out: device arrays, "
-              "NumPy copies, the reordering to grid order). The integrator's working memory is per chunk and "
-              "does not grow with the grid.",
-              "", f"Machine: {platform.machine()}, {os.cpu_count()} CPUs, {rows[0]['devices']} JAX devices."]
+    if per_point:  # needs two sizes
+        lines += ["", f"Growth of the peak per extra point: {min(per_point):.2f}-{max(per_point):.2f} kB (the "
+                  "returned map is 0.14 kB per point; the rest is its transient copies on the way out: device "
+                  "arrays, NumPy copies, the reordering to grid order). The integrator's working memory is per "
+                  "chunk and does not grow with the grid."]
+    lines += ["", f"Machine: {platform.machine()}, {os.cpu_count()} CPUs, {rows[0]['devices']} JAX devices."]
     text = "\n".join(lines) + "\n"
-    (HERE / "results_basins_memory.md").write_text(text)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(text)
     print(text)
 
 

@@ -10,7 +10,7 @@ its run time; run times are medians of several runs after a warm-up. Both use th
 default physics solver (normalised columns, no ridge, unbiased refit, max_iter 20), and the
 supports and coefficients of every fit are compared.
 
-    python benchmarks/bench_stls.py [--repeats 7] [--out benchmarks/results_stls.md]
+    python benchmarks/bench_stls.py [--repeats 7] [--out results/bench_stls.md]
 """
 
 import os
@@ -33,16 +33,23 @@ import numpy as np  # noqa: E402
 import pysindy as ps  # noqa: E402
 
 import gmr_jax as g  # noqa: E402
-from gmr_jax.local._threshold import default_thresholds  # noqa: E402
 
-SOLVER = g.DEFAULT_SOLVER  # threshold replaced per case; alpha 0, normalised, unbiased
+RESULTS = Path(__file__).resolve().parents[1] / "results"
+# the default solver of `reconstruct`; threshold replaced per case; alpha 0, normalised, unbiased
+SOLVER = g.STLS(threshold=0.1, alpha=0.0, normalize_columns=True, unbias=True)
 LIB = g.Library(5, 5)
+
+
+def default_thresholds(theta, y, n: int = 40, lo: float = 1e-6):
+    """Threshold grid of the automatic rule (`AutoThreshold`): geometric from `lo` to 1 times
+    ||y|| (a normalised coefficient is the norm of that term's contribution to y)."""
+    return jnp.sqrt(jnp.sum(y**2)) * jnp.geomspace(lo, 1.0, n)
 
 
 def local_datasets(duration: float):
     """(Θ, y) around each equilibrium of the bistable joint, Θ = Library(5,5)(x - x̄, v)."""
-    system = g.bistable_joint("position_independent")
-    recs = g.make_recordings(system, np.deg2rad(0.5), duration=duration)
+    system = g.systems.bistable_joint("position_independent")
+    recs = g.systems.make_recordings(system, np.deg2rad(0.5), duration=duration)
     out = []
     for rec in recs:
         y = g.regression_targets(rec, np.array([1.0]), "independent")[:, 0]
@@ -119,7 +126,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--grid", type=int, default=100)
-    ap.add_argument("--out", default=str(Path(__file__).with_name("results_stls.md")))
+    ap.add_argument("--out", default=str(RESULTS / "bench_stls.md"))
     args = ap.parse_args()
     rows = []
 
@@ -182,6 +189,7 @@ def main():
     table = render(rows, args.repeats)
     print()
     print(table)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(table)
     print(f"written to {args.out}")
     if any(r["agree"].split("/")[0] != r["agree"].split("/")[1] for r in rows):

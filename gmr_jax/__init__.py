@@ -1,40 +1,61 @@
 """gmr_jax: global model reconstruction of multi-stable structures from local small vibrations.
 
+The API a notebook uses is this module: recordings -> local fits -> coordination -> global
+model -> simulate / basins / refine / actuate / discover. Browsable namespaces:
+`gmr_jax.systems` (built-in systems that make data), `gmr_jax.metrics` (accuracy against a
+truth), `gmr_jax.data` (the EMPS recordings), `gmr_jax.plots` (figures).
+
 Importing gmr_jax enables JAX float64 (`jax_enable_x64`): the numerics need it.
 """
 
+import importlib.metadata as _metadata
+
 from . import _config as _config  # noqa: F401  (enables x64 first)
+
+# results and errors
 from ._config import use_cpu_cores as use_cpu_cores
 from ._errors import GMRInputError as GMRInputError
-from ._reconstruct import (
-    DEFAULT_SOLVER as DEFAULT_SOLVER,
-    Reconstruction as Reconstruction,
-    gmc_sindy as gmc_sindy,
-    reconstruct as reconstruct,
-    regression_targets as regression_targets,
-)
-from ._solution import RESULTS as RESULTS, Solution as Solution
-from .coordination._coordinate import GlobalCoefficients as GlobalCoefficients, coordinate as coordinate
-from .coordination._hermite import hermite_interpolate as hermite_interpolate
-from .coordination._gls import hermite_gls as hermite_gls
-from .local._library import Library as Library
-from .local._local_fit import AutoThreshold as AutoThreshold, LocalFit as LocalFit, fit_local as fit_local
-from .local._stls import STLS as STLS, stls as stls
-from .local._threshold import select_threshold as select_threshold
-from .model._io import load_model as load_model, save_model as save_model
-from .model._model import (
-    AbstractMechanicalModel as AbstractMechanicalModel,
-    GlobalModel as GlobalModel,
-    from_terms as from_terms,
-)
-from .recordings._derivatives import differentiate as differentiate
-from .recordings._noise import add_noise as add_noise
-from .recordings._recording import (
+from ._solution import GMRComputationError as GMRComputationError, RESULTS as RESULTS, Solution as Solution
+from ._topology import AbstractTopology as AbstractTopology, Chain as Chain, Independent as Independent
+
+# recordings
+from ._recordings._derivatives import differentiate as differentiate
+from ._recordings._noise import add_noise as add_noise
+from ._recordings._recording import (
     Recording as Recording,
     load_recording as load_recording,
     save_recording as save_recording,
 )
-from .simulate._inputs import (
+
+# local fits (Eqs. 2-8)
+from ._fit._library import Library as Library
+from ._fit._local_fit import AutoThreshold as AutoThreshold, LocalFit as LocalFit, fit_local as fit_local
+from ._fit._stls import STLS as STLS, stls as stls
+from ._fit._threshold import select_threshold as select_threshold
+
+# coordination (Eqs. 12-21)
+from ._coordination._coordinate import GlobalCoefficients as GlobalCoefficients, coordinate as coordinate
+from ._coordination._gls import hermite_gls as hermite_gls
+from ._coordination._hermite import hermite_interpolate as hermite_interpolate
+
+# the global model (Eq. 1)
+from ._model._io import load_model as load_model, save_model as save_model
+from ._model._model import (
+    AbstractMechanicalModel as AbstractMechanicalModel,
+    GlobalModel as GlobalModel,
+    from_terms as from_terms,
+)
+
+# reconstruction (Algorithm 1) and the GMC-SINDy baseline
+from ._reconstruct._reconstruct import (
+    gmc_sindy as gmc_sindy,
+    reconstruct as reconstruct,
+    regression_targets as regression_targets,
+)
+
+# simulation
+from ._simulate._frequency import resonance_peaks as resonance_peaks, transmissibility as transmissibility
+from ._simulate._inputs import (
     AbstractInput as AbstractInput,
     BaseChirp as BaseChirp,
     BaseSine as BaseSine,
@@ -43,40 +64,29 @@ from .simulate._inputs import (
     NoInput as NoInput,
     Sampled as Sampled,
 )
-from .simulate._simulate import Integrator as Integrator, simulate as simulate
-from .basins._sweep import BasinMap as BasinMap, SweepSettings as SweepSettings, basin_map as basin_map
-from .basins._wells import stable_wells as stable_wells
-from .metrics._metrics import (
-    damping_error as damping_error,
-    damping_error_map as damping_error_map,
-    energy_barriers as energy_barriers,
-    restoring_error as restoring_error,
-)
-from .actuate._actuate import (
-    Actuation as Actuation,
-    ActuateRESULTS as ActuateRESULTS,
-    ActuateSettings as ActuateSettings,
-    actuate as actuate,
-)
-from .simulate._frequency import (
-    resonance_frequencies as resonance_frequencies,
-    resonance_peaks as resonance_peaks,
-    transmissibility as transmissibility,
-)
-from .systems._kresling import (
-    KreslingCell as KreslingCell,
-    KreslingChain as KreslingChain,
-    cell_equilibria as cell_equilibria,
-    kresling3 as kresling3,
-    kresling5 as kresling5,
-    kresling_chain as kresling_chain,
-)
-from .systems._paper_cases import bistable_joint as bistable_joint, tristable_nes as tristable_nes
-from .systems._system import System as System, make_recordings as make_recordings
-from .discover._discover import DiscoveryReport as DiscoveryReport, discover as discover
-from .discover._catalogue import Term as Term, default_catalogue as default_catalogue
-from .discover._select import SelectionRule as SelectionRule
-from .refine._refine import RefineSettings as RefineSettings, refine as refine
-from .refine._shooting import output_error as output_error
+from ._simulate._integrate import Integrator as Integrator
+from ._simulate._simulate import simulate as simulate
 
-__version__ = "0.1.0"
+# basins of deployment (Fig. 11)
+from ._basins._sweep import BasinMap as BasinMap, SweepSettings as SweepSettings, basin_map as basin_map
+from ._basins._wells import stable_wells as stable_wells
+
+# refinement on trajectories
+from ._refine._refine import RefineSettings as RefineSettings, refine as refine
+from ._refine._shooting import OutputError as OutputError, output_error as output_error
+
+# actuation design
+from ._actuate._actuate import Actuation as Actuation, ActuateSettings as ActuateSettings, actuate as actuate
+
+# discovery of missing physics
+from ._discover._catalogue import Term as Term, default_catalogue as default_catalogue
+from ._discover._discover import DiscoveryReport as DiscoveryReport, discover as discover
+from ._discover._select import SelectionRule as SelectionRule
+
+# browsable namespaces
+from . import data as data, metrics as metrics, plots as plots, systems as systems
+
+try:
+    __version__ = _metadata.version("gmr_jax")
+except _metadata.PackageNotFoundError:  # a source tree that was not installed
+    __version__ = "0+unknown"

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 import gmr_jax as g
-from gmr_jax.basins._sweep import SweepSettings, basin_map
-from gmr_jax.basins._wells import stable_wells
-from gmr_jax.simulate._inputs import HalfSineBase, HalfSineTip
+from gmr_jax._basins._sweep import SweepSettings, basin_map
+from gmr_jax._basins._wells import stable_wells
+from gmr_jax._simulate._inputs import HalfSineBase, HalfSineTip
 
 
 def chain():
@@ -24,7 +24,7 @@ def test_wells_and_classification_match_plain_simulation():
     np.testing.assert_allclose(wells, np.sqrt([[30 / 1e5] * 2, [60 / 2e5] * 2]) * [-1, 1], rtol=1e-4)
     f = jnp.array([0.5, 2.0, 4.0])
     A = jnp.array([0.3, 1.5, 2.5])
-    bm = basin_map(m, f, A, wells, chunk=4)
+    bm = basin_map(m, f, A, wells, chunk=4).value
     assert bm.config.shape == (3, 3) and bm.wells.shape == (3, 3, 2)
     for i in range(3):
         for j in range(3):
@@ -39,16 +39,16 @@ def test_wells_and_classification_match_plain_simulation():
 def test_unsettled_and_diverged_are_flagged():
     m = chain()
     wells = stable_wells(m, [[-0.05, 0.05]] * 2)
-    bm = basin_map(m, jnp.array([1.0]), jnp.array([2.0]), wells, settings=SweepSettings(settle_time=0.05))
+    bm = basin_map(m, jnp.array([1.0]), jnp.array([2.0]), wells, settings=SweepSettings(settle_time=0.05)).value
     assert int(bm.config[0, 0]) == -1 and int(bm.result[0, 0]) == g.RESULTS.not_settled._value
     soft = g.from_terms([0.05, 0.05], [{"dof": i, "physics": "stiffness", "order": 3, "coefficient": -1e3}
                                        for i in range(2)], "chain")
-    bm = basin_map(soft, jnp.array([1.0]), jnp.array([50.0]), wells)
+    bm = basin_map(soft, jnp.array([1.0]), jnp.array([50.0]), wells).value
     assert int(bm.config[0, 0]) == -1 and int(bm.result[0, 0]) == g.RESULTS.diverged._value
 
 
 def test_no_recompile_for_new_grid_values_or_coefficients():
-    from gmr_jax.basins import _sweep
+    from gmr_jax._basins import _sweep
 
     m = chain()
     wells = stable_wells(m, [[-0.05, 0.05]] * 2)
@@ -69,9 +69,9 @@ def test_sharded_over_two_host_devices_matches_and_does_not_recompile():
         os.environ["XLA_FLAGS"] = "--xla_force_host_platform_device_count=2"
         import jax, jax.numpy as jnp, numpy as np
         import gmr_jax as g
-        from gmr_jax.basins import _sweep
-        from gmr_jax.basins._sweep import basin_map
-        from gmr_jax.basins._wells import stable_wells
+        from gmr_jax._basins import _sweep
+        from gmr_jax._basins._sweep import basin_map
+        from gmr_jax._basins._wells import stable_wells
         assert len(jax.devices()) == 2
         terms = []
         for i, (k1, k3) in enumerate([(-30.0, 1e5), (-60.0, 2e5)]):
@@ -81,8 +81,8 @@ def test_sharded_over_two_host_devices_matches_and_does_not_recompile():
         m = g.from_terms([0.05, 0.05], terms, "chain")
         w = stable_wells(m, [[-0.05, 0.05]] * 2)
         f, A = jnp.linspace(0.5, 4, 5), jnp.linspace(0.3, 2.5, 3)
-        two = basin_map(m, f, A, w, chunk=4)
-        one = basin_map(m, f, A, w, chunk=4, devices=jax.devices()[:1])
+        two = basin_map(m, f, A, w, chunk=4).value
+        one = basin_map(m, f, A, w, chunk=4, devices=jax.devices()[:1]).value
         assert np.array_equal(np.asarray(two.config), np.asarray(one.config))
         run = _sweep._sharded(tuple(jax.devices()), 4)
         n = run._cached._cache_size()
@@ -99,13 +99,13 @@ def test_joint_and_member_batching_agree_and_meet_the_tolerance():
     m = chain()
     wells = stable_wells(m, [[-0.05, 0.05]] * 2)
     f, A = jnp.linspace(0.3, 4.5, 7), jnp.linspace(0.2, 2.8, 6)
-    joint = basin_map(m, f, A, wells, chunk=8)
-    member = basin_map(m, f, A, wells, chunk=8, settings=SweepSettings(batching="member"))
+    joint = basin_map(m, f, A, wells, chunk=8).value
+    member = basin_map(m, f, A, wells, chunk=8, settings=SweepSettings(batching="member")).value
     assert np.array_equal(np.asarray(joint.config), np.asarray(member.config))
     assert np.all(np.asarray(joint.config) >= 0)
     # both are within tolerance-level distance of a much tighter reference on a few points
-    tight = SweepSettings(rtol=1e-10, atol=1e-12, batching="member")
-    ref = basin_map(m, f[::3], A[::2], wells, settings=tight)
+    tight = SweepSettings(integrator=g.Integrator(rtol=1e-10, atol=1e-12, max_steps=100_000), batching="member")
+    ref = basin_map(m, f[::3], A[::2], wells, settings=tight).value
     for bm in (joint, member):
         np.testing.assert_allclose(np.asarray(bm.x_final)[::2, ::3], np.asarray(ref.x_final), atol=2e-4)
     # the shared step is set by the hardest member (max-norm, not a mean over the chunk): every
@@ -117,7 +117,7 @@ def test_base_load_matches_plain_simulation():
     m = chain()
     wells = stable_wells(m, [[-0.05, 0.05]] * 2)
     f, A = jnp.array([0.7, 3.0]), jnp.array([8.0, 30.0])
-    bm = basin_map(m, f, A, wells, settings=SweepSettings(load="base"))
+    bm = basin_map(m, f, A, wells, settings=SweepSettings(load="base")).value
     for i in range(2):
         for j in range(2):
             t1 = 0.5 / float(f[j]) + 10.0
@@ -132,12 +132,12 @@ def test_failed_joint_chunk_is_rerun_point_by_point():
     m = chain()
     wells = stable_wells(m, [[-0.05, 0.05]] * 2)
     f, A = jnp.array([0.3, 4.5]), jnp.array([0.5, 2.5])
-    member = basin_map(m, f, A, wells, settings=SweepSettings(batching="member"))
-    joint = basin_map(m, f, A, wells)
+    member = basin_map(m, f, A, wells, settings=SweepSettings(batching="member")).value
+    joint = basin_map(m, f, A, wells).value
     need_member, need_joint = int(np.max(member.steps)), int(np.max(joint.steps))
     assert need_joint > need_member  # the shared step costs steps
-    budget = SweepSettings(max_steps=need_member + 5)
-    bm = basin_map(m, f, A, wells, settings=budget)  # the joint solve runs out, members do not
+    budget = SweepSettings(integrator=g.Integrator(rtol=1e-6, atol=1e-8, max_steps=need_member + 5))
+    bm = basin_map(m, f, A, wells, settings=budget).value  # the joint solve runs out, members do not
     assert np.array_equal(np.asarray(bm.config), np.asarray(member.config))
     assert np.array_equal(np.asarray(bm.steps), np.asarray(member.steps))
     assert np.all(np.asarray(bm.result) == g.RESULTS.successful._value)
@@ -148,20 +148,20 @@ def test_progress_blocks_give_the_same_map():
     wells = stable_wells(m, [[-0.05, 0.05]] * 2)
     f, A = jnp.linspace(0.3, 4.5, 9), jnp.linspace(0.2, 2.8, 5)
     calls = []
-    a = basin_map(m, f, A, wells, chunk=4, progress=lambda done, total: calls.append((done, total)))
-    b = basin_map(m, f, A, wells, chunk=4)
+    a = basin_map(m, f, A, wells, chunk=4, progress=lambda done, total: calls.append((done, total))).value
+    b = basin_map(m, f, A, wells, chunk=4).value
     assert np.array_equal(np.asarray(a.config), np.asarray(b.config))
     assert len(calls) > 1 and calls[-1] == (45, 45) and all(d <= t for d, t in calls)
 
 
 def test_new_settle_time_or_tolerance_does_not_recompile():
-    from gmr_jax.basins import _sweep
+    from gmr_jax._basins import _sweep
 
     m = chain()
     wells = stable_wells(m, [[-0.05, 0.05]] * 2)
     basin_map(m, jnp.array([1.0, 2.0]), jnp.array([1.0]), wells, settings=SweepSettings(settle_time=3.0))
     before = _sweep.n_chunk_compiles()
-    basin_map(m, jnp.array([1.0, 2.0]), jnp.array([0.5]), wells, settings=SweepSettings(settle_time=4.0, rtol=1e-7))
+    basin_map(m, jnp.array([1.0, 2.0]), jnp.array([0.5]), wells, settings=SweepSettings(settle_time=4.0, integrator=g.Integrator(rtol=1e-7, atol=1e-8, max_steps=100_000)))
     assert _sweep.n_chunk_compiles() == before
 
 
@@ -184,6 +184,7 @@ def test_bad_inputs_name_the_problem(kwargs, match):
         SweepSettings(load="top")
 
 
+@pytest.mark.slow
 def test_two_processes_with_jax_distributed_each_get_the_whole_map(tmp_path):
     # multi-host scale-out through JAX's own runtime, run here as two CPU processes (gloo)
     import socket
@@ -210,7 +211,7 @@ def test_two_processes_with_jax_distributed_each_get_the_whole_map(tmp_path):
         m = g.from_terms([0.05, 0.05], terms, "chain")
         w = g.stable_wells(m, [[-0.05, 0.05]] * 2)
         assert jax.process_count() == 2 and len(jax.devices()) == 2
-        bm = g.basin_map(m, np.linspace(0.5, 4, 7), np.linspace(0.3, 2.5, 5), w, chunk=4)
+        bm = g.basin_map(m, np.linspace(0.5, 4, 7), np.linspace(0.3, 2.5, 5), w, chunk=4).value
         np.save(sys.argv[2], np.asarray(bm.config))
     """)
     outs = [tmp_path / f"p{k}.npy" for k in range(2)]
@@ -221,7 +222,7 @@ def test_two_processes_with_jax_distributed_each_get_the_whole_map(tmp_path):
         assert p.returncode == 0, err[-2000:]
     m = chain()
     one = basin_map(m, np.linspace(0.5, 4, 7), np.linspace(0.3, 2.5, 5), stable_wells(m, [[-0.05, 0.05]] * 2),
-                    chunk=4)
+                    chunk=4).value
     for o in outs:
         assert np.array_equal(np.load(o), np.asarray(one.config))
 
@@ -236,6 +237,6 @@ def test_use_cpu_cores_after_jax_started_is_a_clear_error():
 
 
 def test_default_chunk_scales_with_the_number_of_cells():
-    from gmr_jax.basins._sweep import default_chunk
+    from gmr_jax._basins._sweep import default_chunk
 
     assert [default_chunk(d) for d in (1, 3, 5, 10, 40)] == [512, 512, 256, 128, 64]

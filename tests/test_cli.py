@@ -7,18 +7,18 @@ import pytest
 
 import gmr_jax as g
 from gmr_jax.metrics._metrics import restoring_error
-from gmr_jax.cli._main import main
+from gmr_jax._cli._main import main
 
 
 def run(args):
-    return subprocess.run([sys.executable, "-m", "gmr_jax.cli._main", *args], capture_output=True, text=True)
+    return subprocess.run([sys.executable, "-m", "gmr_jax._cli._main", *args], capture_output=True, text=True)
 
 
 @pytest.fixture(scope="module")
 def joint_files(tmp_path_factory):
     d = tmp_path_factory.mktemp("rec")
-    s = g.bistable_joint("position_independent")
-    recs = g.make_recordings(s, np.deg2rad(1.0), seed=1, duration=5.0)
+    s = g.systems.bistable_joint("position_independent")
+    recs = g.systems.make_recordings(s, np.deg2rad(1.0), seed=1, duration=5.0)
     paths = []
     for r in recs:
         p = d / f"{r.name}.csv"
@@ -51,7 +51,14 @@ def _bad(tmp_path, name, **arrays):
     return str(p)
 
 
-def test_bad_inputs_one_line_exit_2(joint_files, tmp_path):
+def _main(args, capsys):
+    """The command in-process (no interpreter start-up): (exit status, stderr)."""
+    capsys.readouterr()
+    rc = main(args)
+    return rc, capsys.readouterr().err
+
+
+def test_bad_inputs_one_line_exit_2(joint_files, tmp_path, capsys):
     t = np.arange(1000) * 1e-3
     x = np.sin(t)[:, None]
     cases = {
@@ -61,16 +68,18 @@ def test_bad_inputs_one_line_exit_2(joint_files, tmp_path):
         "shape": _bad(tmp_path, "shape.npz", t=t, x=x[:900]),
     }
     for msg, path in cases.items():
-        r = run(["fit", path, joint_files[0], "--out", str(tmp_path / "m.json")])
-        assert r.returncode == 2, r.stderr
-        assert msg in r.stderr and "Traceback" not in r.stderr
-        assert len(r.stderr.strip().splitlines()) == 1
-    r = run(["fit", joint_files[0], "--out", str(tmp_path / "m.json")])
-    assert r.returncode == 2 and "at least two distinct equilibria" in r.stderr and "Traceback" not in r.stderr
-    r = run(["fit", joint_files[0], joint_files[0], "--out", str(tmp_path / "m.json")])
-    assert r.returncode == 2 and "same equilibrium" in r.stderr
+        rc, err = _main(["fit", path, joint_files[0], "--out", str(tmp_path / "m.json")], capsys)
+        assert rc == 2, err
+        assert msg in err and "Traceback" not in err
+        assert len(err.strip().splitlines()) == 1
+    rc, err = _main(["fit", joint_files[0], "--out", str(tmp_path / "m.json")], capsys)
+    assert rc == 2 and "at least two distinct equilibria" in err and "Traceback" not in err
+    rc, err = _main(["fit", joint_files[0], joint_files[0], "--out", str(tmp_path / "m.json")], capsys)
+    assert rc == 2 and "same equilibrium" in err
+    # the installed entry point, in a fresh interpreter: same one line, same status
     r = run(["fit", str(tmp_path / "missing.csv"), "--out", str(tmp_path / "m.json")])
-    assert r.returncode == 2 and "no such file" in r.stderr
+    assert r.returncode == 2 and "no such file" in r.stderr and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
 
 
 def test_basins_cli(tmp_path):
@@ -96,9 +105,9 @@ def test_basins_cli(tmp_path):
 def test_fit_chain_recordings_one_file_per_configuration(tmp_path, capsys):
     """`gmr fit` on a chain: one NPZ per configuration (folded, deployed) of the 3-cell Kresling
     chain; the model is a 3-DOF chain with every cell's restoring force and wells right."""
-    s = g.kresling3()
+    s = g.systems.kresling3()
     paths = []
-    for r in g.make_recordings(s, 3e-4, seed=0, duration=15.0):
+    for r in g.systems.make_recordings(s, 3e-4, seed=0, duration=15.0):
         p = tmp_path / f"{r.name}.npz"
         g.save_recording(r, p)
         paths.append(str(p))

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 import gmr_jax
-from gmr_jax.cli._main import main
-from gmr_jax.discover._equation import dof_rows
-from gmr_jax.discover._scenarios import Scenario, build, build_full, model_error
-from gmr_jax.discover._select import SelectionRule, cv_sse, rss
+from gmr_jax._cli._main import main
+from gmr_jax._discover._equation import dof_rows
+from studies.scenarios import Scenario, build, build_full, model_error
+from gmr_jax._discover._select import SelectionRule, cv_sse, rss
 
 K = (2 * np.pi * 2.0) ** 2
 C = 2 * 0.05 * np.sqrt(K)
@@ -30,7 +30,7 @@ def coulomb():
     eff = (gmr_jax.Term(0, "velocity_damping", 0), 0.15, gmr_jax.Term(0, "velocity_damping", 1))
     sc = _scenario(eff, snr_db=50.0)
     b = build_full(sc)
-    rep = gmr_jax.discover(b.model, b.est, b.hold, rule=RULE)
+    rep = gmr_jax.discover(b.model, b.est, b.hold, rule=RULE).value
     models = (b.truth, b.model, rep.model)
     rep.series["model_error"] = [model_error(m, b.hold_clean, sc) for m in models]
     return b.model, b.est, b.hold, b.c_eff, rep
@@ -74,7 +74,7 @@ def test_scenario_keeps_clean_signals():
 
 def test_control_nothing_missing():
     _, model, est, hold, _ = build(_scenario(None, snr_db=40.0, measured="x"))
-    rep = gmr_jax.discover(model, est, hold, rule=RULE)
+    rep = gmr_jax.discover(model, est, hold, rule=RULE).value
     assert rep.findings == []
     assert rep.settings["form"] == "weak"  # a was estimated: no acceleration used
     assert "Nothing missing" in rep.summary()
@@ -173,8 +173,9 @@ def test_cli_discover(tmp_path, capsys):
     assert rc == 2 and err.count("\n") == 0 and "bad.npz" in err
 
 
+@pytest.mark.slow
 def test_emps_through_discover():
-    from gmr_jax.discover._emps_study import discover_emps
+    from studies.emps_study import discover_emps
 
     model, rep = discover_emps(n_boot=100)
     assert float(model.velocity_damping[0, 1]) > 350  # Fv absorbed the friction

@@ -6,7 +6,7 @@ import pytest
 import gmr_jax
 from gmr_jax import GMRInputError
 from gmr_jax.data import EMPS_REFERENCE, emps_raw, load_emps
-from gmr_jax.discover import _emps_study as study
+from studies import emps_study as study
 
 FC_REF, FV_REF = 20.3935, 203.5034
 
@@ -73,6 +73,7 @@ def test_validation_error_improves(runs):
     assert err["viscous"][0] > 0.12 and err["coulomb"][0] < 0.06 and err["coulomb"][1] < 0.09
 
 
+@pytest.mark.slow
 def test_full_rate_recording_also_finds_coulomb():
     """A generic fit on the 1 kHz Recording (sgn of its own v, no decimation) agrees."""
     rec = load_emps("estimation")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import gmr_jax as g
-from gmr_jax.coordination._hermite import hermite_interpolate
+from gmr_jax._coordination._hermite import hermite_interpolate
 
 
 def taylor_at(coef, x0, r):

@@ -179,7 +179,7 @@ def test_systems():
 
 def test_recordings_are_finite_small_and_shrink_towards_the_tip():
     s = kresling5()
-    recs = gmr_jax.make_recordings(s, KRESLING5_AMPLITUDE)
+    recs = gmr_jax.systems.make_recordings(s, KRESLING5_AMPLITUDE)
     L = np.asarray(s.truth.interwell)
     assert len(recs) == 2
     for r, e in zip(recs, s.equilibria):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import gmr_jax as g
-from gmr_jax._reconstruct import low_order_terms
+from gmr_jax._reconstruct._reconstruct import low_order_terms, velocity_terms_not_shared
 from gmr_jax.metrics._metrics import damping_error, equilibria, restoring_error
 
 
@@ -12,8 +12,8 @@ from gmr_jax.metrics._metrics import damping_error, equilibria, restoring_error
 def joint_data():
     out = {}
     for damping in ("position_independent", "position_dependent"):
-        s = g.bistable_joint(damping)
-        out[damping] = (s, g.make_recordings(s, np.deg2rad(0.5), snr_db=60.0, seed=3))
+        s = g.systems.bistable_joint(damping)
+        out[damping] = (s, g.systems.make_recordings(s, np.deg2rad(0.5), snr_db=60.0, seed=3))
     return out
 
 
@@ -22,7 +22,7 @@ def joint_data():
 def test_joint_small_amplitude(joint_data, damping, term):
     s, recs = joint_data[damping]
     res = g.reconstruct(recs, g.Library(5, 5))
-    m = res.model
+    m = res.value
     assert restoring_error(m, s.truth, 0, s.x_range[0]) < 0.01
     assert damping_error(m, s.truth, 0, s.x_range[0], s.v_range[0]) < 0.05
     # Table B2 shape: cubic restoring and the right damping term dominate
@@ -35,20 +35,20 @@ def test_joint_small_amplitude(joint_data, damping, term):
     assert m.stderr is not None and np.isfinite(np.asarray(m.stderr["stiffness"])[0, 3])
     stable = [x for x, st in equilibria(m, 0, s.x_range[0]) if st]
     np.testing.assert_allclose(stable, [-1.1308, 1.1308], atol=5e-3)
-    assert all(min(sc["r2"]) > 0.99 for sc in res.training.values())
+    assert all(min(sc["r2"]) > 0.99 for sc in res.stats["training"].values())
 
 
 def test_gmc_sindy_runs_and_degrades(joint_data):
     s, recs = joint_data["position_dependent"]
     gm = g.gmc_sindy(recs, g.Library(7, 7))
     # at 0.5 degrees the global-library fit loses the damping (paper Fig. 6c); measured, not assumed
-    assert damping_error(gm.model, s.truth, 0, s.x_range[0], s.v_range[0]) > 0.2
+    assert damping_error(gm.value, s.truth, 0, s.x_range[0], s.v_range[0]) > 0.2
 
 
 def test_nes_three_equilibria():
-    s = g.tristable_nes()
-    recs = g.make_recordings(s, 1e-3, snr_db=60.0, seed=0, duration=5.0)
-    m = g.reconstruct(recs, g.Library(3, 3)).model
+    s = g.systems.tristable_nes()
+    recs = g.systems.make_recordings(s, 1e-3, snr_db=60.0, seed=0, duration=5.0)
+    m = g.reconstruct(recs, g.Library(3, 3)).value
     assert restoring_error(m, s.truth, 0, s.x_range[0]) < 0.02
     got, want = equilibria(m, 0, s.x_range[0]), equilibria(s.truth, 0, s.x_range[0])
     assert [st for _, st in got] == [st for _, st in want] == [True, False, True, False, True]
@@ -67,7 +67,7 @@ def test_missing_derivatives_are_estimated(joint_data):
     s, recs = joint_data["position_independent"]
     bare = [g.Recording(t=r.t, x=r.x, base_acc=r.base_acc, name=r.name) for r in recs]
     res = g.reconstruct(bare, g.Library(5, 5))
-    assert restoring_error(res.model, s.truth, 0, s.x_range[0]) < 0.03
+    assert restoring_error(res.value, s.truth, 0, s.x_range[0]) < 0.03
 
 
 def test_keep_exempts_terms_from_the_threshold():
@@ -98,7 +98,7 @@ def test_unshared_velocity_damping_mask():
     coef[0, col[("velocity_damping", 3)]] = 5.0  # v^3 at one well only: not shared
     coef[:, col[("velocity_damping", 2)]] = 1.0  # v|v| at both wells: shared
     coef[0, col[("position_damping", 1)]] = 2.0  # x v differs by well legitimately
-    mask = g._reconstruct.velocity_terms_not_shared(coef, lib)
+    mask = velocity_terms_not_shared(coef, lib)
     assert [t for t, m in zip(terms, mask) if m] == [("velocity_damping", 3)]
 
 
@@ -106,15 +106,15 @@ def test_damping_terms_found_at_one_well_only_are_dropped():
     """Kresling chain (damping ratio 0.2, 0.75 mm, seed 4): the base cell's folded-well fit
     selects v|v|, v^3, v^3|v| (each > 3 sigma) in place of the unselected x^2 v; averaged by
     Eq. (21) they put 8 % error on the global damping. The sharing rule removes them."""
-    system = g.kresling5(damping_ratio=0.2)
-    recs = g.make_recordings(system, 7.5e-4, snr_db=60.0, seed=4)
+    system = g.systems.kresling5(damping_ratio=0.2)
+    recs = g.systems.make_recordings(system, 7.5e-4, snr_db=60.0, seed=4)
     box = system.x_range[0], system.v_range[0]
     raw = g.reconstruct(recs, g.Library(5, 5), shared_damping=False)
-    assert damping_error(raw.model, system.truth, 0, *box) > 0.05
+    assert damping_error(raw.value, system.truth, 0, *box) > 0.05
     res = g.reconstruct(recs, g.Library(5, 5))
-    assert res.dofs[0].stats["dropped_velocity_damping"] == [2, 3, 4]
-    assert damping_error(res.model, system.truth, 0, *box) < 0.005
-    assert np.all(res.model.velocity_damping[:, 2:] == 0)
+    assert res.stats["dofs"][0].stats["dropped_velocity_damping"] == [2, 3, 4]
+    assert damping_error(res.value, system.truth, 0, *box) < 0.005
+    assert np.all(res.value.velocity_damping[:, 2:] == 0)
     for i in range(1, 5):  # cells where every well agrees are untouched
-        assert res.dofs[i].stats["dropped_velocity_damping"] == []
-        np.testing.assert_array_equal(res.dofs[i].local_coef, raw.dofs[i].local_coef)
+        assert res.stats["dofs"][i].stats["dropped_velocity_damping"] == []
+        np.testing.assert_array_equal(res.stats["dofs"][i].local_coef, raw.stats["dofs"][i].local_coef)

@@ -11,7 +11,7 @@ cut-off 100 Hz = 5 x the 20 Hz position-loop bandwidth, `scipy.signal.filtfilt`)
 central differences. Optionally every channel (position, velocity, acceleration and force
 alike) is then low-passed and decimated in parallel (the benchmark's "decimate" step,
 `scipy.signal.decimate`, 8th-order Chebyshev I, zero phase), which removes the force ripples
-the controller rejects. `gmr_jax.discover._emps_study.compare_differentiation` compares the
+the controller rejects. `compare_differentiation` in `studies/emps_study.py` compares the
 choices: any cut-off from 60 to 200 Hz (or plain central differences, or a Savitzky-Golay
 window of at most ~21 samples) gives the same estimates; longer windows or lower cut-offs
 smear the bang-bang accelerations (M biased up, force error 2-15 x larger), and the
@@ -26,7 +26,7 @@ from scipy.signal import butter, filtfilt
 from scipy.signal import decimate as _sp_decimate
 
 from .._errors import GMRInputError
-from ..recordings._recording import Recording, validate
+from .._recordings._recording import Recording, validate
 
 FILES = {"estimation": "DATA_EMPS.mat", "validation": "DATA_EMPS_PULSES.mat"}
 SAMPLE_TIME = 1e-3  # s, the dSPACE sampling period (1 kHz)
@@ -123,7 +123,7 @@ def load_emps(
       benchmark filters each regression column, so its Coulomb column is the decimated
       sgn(v) (a smooth step), not sgn of the decimated v; a fit that builds sgn(v) from this
       recording's `v` is worse (Coulomb model: 5.9 % instead of 4.0 % force error on the
-      estimation run). `gmr_jax.discover._emps_study.prepare` does the column-wise filtering.
+      estimation run). `prepare` in `studies/emps_study.py` does the column-wise filtering.
     - `add_pulses` adds the validation file's `pulses_N` to the force. Off by default: the
       pulses are already inside `vir` (each pulse edge makes `gtau * vir` jump by ~5 V x gtau
       in one sample, and a free coefficient on `pulses_N` fits to ~0), so adding them counts

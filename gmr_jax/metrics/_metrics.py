@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..model._model import AbstractMechanicalModel
+from .._model._model import AbstractMechanicalModel
 
 
 def _grid_forces(model: AbstractMechanicalModel, dof: int, xs, vs, which: str):

@@ -1,0 +1,7 @@
+"""Figures (matplotlib `Figure` objects, built without pyplot: importing this module does not
+change the matplotlib backend). Each function saves to `path` when given and returns the
+figure, which a notebook displays."""
+
+from ._basins import basin_figure as basin_figure, config_label as config_label
+from ._discovery import discovery_figures as discovery_figures
+from ._figures import case_figure as case_figure

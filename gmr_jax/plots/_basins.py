@@ -1,11 +1,10 @@
 """Basin picture: final configuration over the (f, A) grid, coloured by configuration."""
 
 import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.colors import BoundaryNorm, ListedColormap  # noqa: E402
+import numpy as np
+from matplotlib.colors import BoundaryNorm, ListedColormap
+from matplotlib.figure import Figure
+from matplotlib.patches import Rectangle
 
 
 def config_label(config: int, n_dof: int) -> str:
@@ -15,29 +14,34 @@ def config_label(config: int, n_dof: int) -> str:
     return "-".join(str((config >> i) & 1) for i in range(n_dof))
 
 
-def basin_figure(f, A, config, n_dof: int, path, title: str = ""):
+def basin_figure(f, A, config, n_dof: int, path=None, title: str = "") -> Figure:
+    """The final configuration over the (f, A) grid, one colour per configuration (legend in
+    the 0-1-1-0-0 style, cell 0 first; dark grey: not settled or failed). Saved to `path`
+    when given; returns the matplotlib `Figure`."""
     config = np.asarray(config)
     values = sorted(set(config.ravel().tolist()))
     index = {v: k for k, v in enumerate(values)}
     img = np.vectorize(index.get)(config)
     n_conf = sum(v >= 0 for v in values)
     if n_conf <= 20:
-        base = plt.get_cmap("tab20")
+        base = matplotlib.colormaps["tab20"]
         pick = [base(k) for k in range(n_conf)]
     else:  # distinct colours for every configuration (no reuse of a 20-colour cycle)
-        base = plt.get_cmap("nipy_spectral")
+        base = matplotlib.colormaps["nipy_spectral"]
         pick = [base(0.05 + 0.9 * k / max(n_conf - 1, 1)) for k in range(n_conf)]
     it = iter(pick)
     colors = [(0.15, 0.15, 0.15, 1.0) if v < 0 else next(it) for v in values]
     cmap = ListedColormap(colors)
     norm = BoundaryNorm(np.arange(len(values) + 1) - 0.5, len(values))
-    fig, ax = plt.subplots(figsize=(7.5 if len(values) <= 16 else 10, 5), constrained_layout=True)
+    fig = Figure(figsize=(7.5 if len(values) <= 16 else 10, 5), layout="constrained")
+    ax = fig.subplots()
     ax.pcolormesh(np.asarray(f), np.asarray(A), img, cmap=cmap, norm=norm, shading="auto")
-    handles = [plt.Rectangle((0, 0), 1, 1, color=colors[k]) for k in range(len(values))]
+    handles = [Rectangle((0, 0), 1, 1, color=colors[k]) for k in range(len(values))]
     ax.legend(handles, [config_label(v, n_dof) for v in values], title="final configuration",
               bbox_to_anchor=(1.02, 1), loc="upper left", fontsize=7, ncol=1 if len(values) <= 16 else 2)
     ax.set_xlabel("actuation frequency f [Hz]")
     ax.set_ylabel("actuation amplitude A")
     ax.set_title(title or "deployment basins (tip half-sine, Eq. 25)")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    if path is not None:
+        fig.savefig(path, dpi=110)
+    return fig

@@ -1,21 +1,20 @@
 """Figures in the style of the paper's Figs. 4-7: restoring-force curves and damping-error maps."""
 
-import matplotlib
+import numpy as np
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from ..metrics._metrics import _grid_forces, damping_error_map  # noqa: E402
+from ..metrics._metrics import _grid_forces, damping_error_map
 
 
-def case_figure(system, models: dict, recordings, path, dof: int = 0, title: str = ""):
+def case_figure(system, models: dict, recordings, path=None, dof: int = 0, title: str = "") -> Figure:
     """One row: restoring force (truth, each model, the ranges the data covered) and, per
-    model, the damping-error map e_d = log10|F_d - F_d,true| (Eq. 22) on the phase plane."""
+    model, the damping-error map e_d = log10|F_d - F_d,true| (Eq. 22) on the phase plane.
+    Saved to `path` when given; returns the matplotlib `Figure`."""
     truth = system.truth
     xr, vr = system.x_range[dof], system.v_range[dof]
     n = 1 + len(models)
-    fig, axes = plt.subplots(1, n, figsize=(4.6 * n, 3.8), constrained_layout=True)
+    fig = Figure(figsize=(4.6 * n, 3.8), layout="constrained")
+    axes = fig.subplots(1, n)
     ax = axes[0]
     xs = np.linspace(*xr, 400)
     ax.plot(xs, _grid_forces(truth, dof, xs, np.zeros(1), "restoring")[:, 0], "k-", lw=2.5, label="truth")
@@ -44,5 +43,6 @@ def case_figure(system, models: dict, recordings, path, dof: int = 0, title: str
         fig.colorbar(im, ax=ax)
     if title:
         fig.suptitle(title)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    if path is not None:
+        fig.savefig(path, dpi=110)
+    return fig

@@ -50,7 +50,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ..model._model import AbstractMechanicalModel
+from .._model._model import AbstractMechanicalModel
+from .._topology import AbstractTopology, Chain, as_topology
 from ._system import System
 
 TWISTS = ("linear", "torque_free")
@@ -252,7 +253,7 @@ class KreslingChain(AbstractMechanicalModel):
 
     masses: Float[Array, " dof"]
     cells: KreslingCell
-    topology: str = eqx.field(static=True, default="chain")
+    topology: AbstractTopology = eqx.field(static=True, default=Chain(), converter=as_topology)
 
     def restoring(self, x: Float[Array, " dof"]) -> Float[Array, " dof"]:
         return jax.vmap(lambda c, xi: c.force(xi))(self.cells, x)
@@ -384,7 +385,7 @@ KRESLING5_AMPLITUDE = 3e-4
 #: the model rather than the chaos of a lightly damped chain. The quasi-static regime then deploys
 #: the cells mostly in order of stiffness (61 % of points at f <= 0.5 Hz end in 0-0-0-0-0,
 #: 1-0-0-0-0, ..., 1-1-1-1-1; 33 % at 0.04), closer to the paper's Fig. 11 description.
-#: Measured by benchmarks/kresling_basins_ceiling.py.
+#: Measured by studies/kresling_basins_ceiling.py.
 KRESLING5_DEPLOYMENT_DAMPING = 0.2
 #: Base amplitude (m) for `make_recordings(kresling5(damping_ratio=0.2), ...)`: amplitude ratios
 #: about 5.2, 2.9, 1.2, 0.5, 0.14 % (folded), base to tip: the nominal chain's 5 % at the base.
@@ -427,7 +428,7 @@ def kresling5(twist: str = "linear", damping_ratio: float = 0.04) -> System:
     Metrics box: x from 10 % before the folded to 10 % past the deployed state, |v| <= 0.1 m/s.
     `twist="torque_free"` gives the harder, strongly asymmetric variant. `damping_ratio` at the
     wells (default 0.04); `KRESLING5_DEPLOYMENT_DAMPING` (0.2) is the deployment-basin benchmark's
-    (see `benchmarks/kresling_basins.py`), with base amplitude `KRESLING5_DEPLOYMENT_AMPLITUDE`
+    (see `studies/kresling_basins.py`), with base amplitude `KRESLING5_DEPLOYMENT_AMPLITUDE`
     for the same ~5 % amplitude ratio at the base cell.
     """
     chain = kresling_chain(KRESLING5_STIFFNESS, KRESLING5_MASSES, twist=twist, damping_ratio=damping_ratio)

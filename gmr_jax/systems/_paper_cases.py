@@ -3,7 +3,7 @@ tri-stable NES (Sec. 3.1, Eq. 23, Table 1)."""
 
 import numpy as np
 
-from ..model._model import from_terms
+from .._model._model import from_terms
 from ._system import System
 
 #: Bistable joint per unit inertia (Tables B1/B2): F_r = -2244 θ + 1755 θ³.

@@ -7,11 +7,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..model._model import AbstractMechanicalModel
-from ..recordings._noise import add_noise
-from ..recordings._recording import Recording
-from ..simulate._inputs import BaseChirp
-from ..simulate._simulate import Integrator, simulate
+from .._model._model import AbstractMechanicalModel
+from .._recordings._noise import add_noise
+from .._recordings._recording import Recording
+from .._simulate._inputs import BaseChirp
+from .._simulate._integrate import Integrator
+from .._simulate._simulate import simulate
 
 
 @dataclass(frozen=True)

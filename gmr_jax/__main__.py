@@ -1,0 +1,8 @@
+"""`python -m gmr_jax ...` is the `gmr` command."""
+
+import sys
+
+from ._cli._main import main
+
+if __name__ == "__main__":
+    sys.exit(main())

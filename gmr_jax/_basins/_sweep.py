@@ -1,0 +1,308 @@
+"""Deployment-basin sweeps over actuation grids (paper Fig. 11, load of Eq. 25): chunked
+diffrax solves, sharded over all devices, every point's result code kept."""
+
+import functools
+from collections.abc import Callable
+
+import diffrax as dfx
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh
+from jax.sharding import PartitionSpec as P
+from jaxtyping import Array, ArrayLike, Float, Int
+
+from .._errors import GMRInputError
+from .._model._model import AbstractMechanicalModel
+from .._simulate._inputs import half_sine
+from .._simulate._integrate import Integrator, integrate, vector_field
+from .._solution import RESULTS, Solution, as_result, code_name, raise_if_failed, value_of
+from ._joint import joint_final_states
+
+LOADS = ("tip", "base")
+BATCHINGS = ("joint", "member")
+
+
+class SweepSettings(eqx.Module):
+    """How each grid point is simulated and judged.
+
+    - `settle_time`: free time after the actuation ends (t1 = 1/(2f) + settle_time).
+    - `integrator`: tolerances (the same for every point; Tsit5 with PID control, the
+      switch-off time 1/(2f) declared to the controller) and `max_steps`, the step budget of
+      one solve (a chunk in "joint" batching, a point in "member").
+    - `x_tol`: a cell is in a well when |x - x_well| < x_tol · (span of that cell's wells).
+    - `v_tol`: ... and |v| < v_tol · span · (1 s⁻¹).
+    - `box_spans`: divergence box: a point whose x leaves centre ± box_spans · span (centre and
+      span of each cell's wells) is stopped there and flagged `diverged`.
+    - `load`: "tip" (default, Eq. 25: force A sin(2πft) on the last mass for t <= 1/(2f)) or
+      "base" (the same half-sine as base acceleration, A in m/s²).
+    - `batching`: "joint" (default): each chunk is integrated as one ODE with one step size
+      and a max-over-members error norm (every member meets the tolerance; see `_joint`), and a
+      chunk whose joint solve fails is re-run member by member; "member": `vmap` of one solve
+      per point (each its own step size; slower: per-member book-keeping at every step).
+    """
+
+    settle_time: float = 10.0
+    integrator: Integrator = Integrator(rtol=1e-6, atol=1e-8, max_steps=100_000)
+    x_tol: float = 0.1
+    v_tol: float = 0.05
+    box_spans: float = 20.0
+    load: str = eqx.field(static=True, default="tip")
+    batching: str = eqx.field(static=True, default="joint")
+
+    def __check_init__(self):
+        if self.load not in LOADS:
+            raise GMRInputError(f"SweepSettings.load must be one of {LOADS}, got {self.load!r}")
+        if self.batching not in BATCHINGS:
+            raise GMRInputError(f"SweepSettings.batching must be one of {BATCHINGS}, got {self.batching!r}")
+
+
+class BasinMap(eqx.Module):
+    """`wells` (NA, NF, dof): index of the well each cell ended in (ordered by deformation),
+    -1 when not settled or failed; `config` (NA, NF): bit i set = cell i in its second well
+    (-1 as above); `result` (NA, NF) RESULTS codes; `x_final`, `v_final` (NA, NF, dof);
+    `steps` (NA, NF): accepted integrator steps of the solve that produced the point (its
+    chunk's, under "joint" batching)."""
+
+    f: Float[Array, " nf"]
+    A: Float[Array, " na"]
+    wells: Int[Array, "na nf dof"]
+    config: Int[Array, "na nf"]
+    result: Int[Array, "na nf"]
+    x_final: Float[Array, "na nf dof"]
+    v_final: Float[Array, "na nf dof"]
+    steps: Int[Array, "na nf"]
+
+
+def _member_final_state(model, settings: SweepSettings, x0, f, a, centre, span):
+    """One point on its own (its own step size), stopped at the divergence box."""
+    t_off = 0.5 / f
+    box = (centre - settings.box_spans * span, centre + settings.box_spans * span)
+    traj = integrate(vector_field(model, half_sine(settings.load, f, a, model.n_dof)), 0.0,
+                     t_off + settings.settle_time, (x0, jnp.zeros_like(x0)), settings.integrator,
+                     saveat=dfx.SaveAt(t1=True), box=box, jump_ts=jnp.reshape(t_off, (1,)))
+    return traj.ys[0][-1], traj.ys[1][-1], traj.result._value, traj.stats["num_steps"]
+
+
+def _final_state(model, settings: SweepSettings, x0, f, a, centre, span):
+    """Final (x, v) and RESULTS code of one half-sine actuation (per-point solve)."""
+    return _member_final_state(model, settings, x0, f, a, centre, span)[:3]
+
+
+def classify(x1, v1, code, wells, span, settings: SweepSettings):
+    """Well index per cell (-1: not settled, failed, diverged) and the configuration bits."""
+    dist = jnp.abs(x1[:, None] - wells)  # (dof, max_wells)
+    dist = jnp.where(jnp.isnan(wells), jnp.inf, dist)
+    k = jnp.argmin(dist, axis=1)
+    near = jnp.min(dist, axis=1) < settings.x_tol * span
+    slow = jnp.abs(v1) < settings.v_tol * span
+    settled = near & slow & jnp.isfinite(x1)
+    good = code == RESULTS.successful._value
+    idx = jnp.where(settled & good, k, -1)
+    code = jnp.where(good & ~jnp.all(settled), RESULTS.not_settled._value, code)
+    bits = jnp.sum(jnp.where(idx == 1, 2 ** jnp.arange(idx.shape[0]), 0))
+    config = jnp.where(jnp.all(idx >= 0), bits, -1)
+    return idx, config, code
+
+
+def _geometry(wells):
+    span = jnp.nanmax(wells, axis=1) - jnp.nanmin(wells, axis=1)
+    span = jnp.where(span > 0, span, 1.0)
+    centre = 0.5 * (jnp.nanmax(wells, axis=1) + jnp.nanmin(wells, axis=1))
+    return span, centre
+
+
+def _chunk(model, settings, x0, wells, fs, amps):
+    """Final states, wells, configurations, codes and steps of one chunk of B points."""
+    span, centre = _geometry(wells)
+    members = jax.vmap(lambda f, a: _member_final_state(model, settings, x0, f, a, centre, span))
+    if settings.batching == "member":
+        x1, v1, code, steps = members(fs, amps)
+    else:
+        x1, v1, code, joint_steps, ok = joint_final_states(model, settings, x0, fs, amps, centre, span)
+        steps = jnp.broadcast_to(joint_steps, fs.shape)
+        # a failed joint solve (max_steps, step-size collapse) is re-run point by point, so one
+        # hard point costs its chunk time but not its neighbours' answers
+        x1, v1, code, steps = jax.lax.cond(ok, lambda: (x1, v1, code, steps), lambda: members(fs, amps))
+    idx, config, code = jax.vmap(lambda x, v, c: classify(x, v, c, wells, span, settings))(x1, v1, code)
+    return idx, config, code, x1, v1, steps
+
+
+def _chunks(model, settings, x0, wells, fs, amps, chunk: int):
+    out = jax.lax.map(lambda p: _chunk(model, settings, x0, wells, p[0], p[1]),
+                      (fs.reshape(-1, chunk), amps.reshape(-1, chunk)))
+    return jax.tree.map(lambda o: o.reshape(-1, *o.shape[2:]), out)
+
+
+_sweep_points = eqx.filter_jit(_chunks)
+
+
+@functools.lru_cache(maxsize=32)
+def _sharded(devices: tuple, chunk: int):
+    """The points split over `devices` with shard_map; built once per (devices, chunk) so that
+    later calls hit the jit cache."""
+    mesh = Mesh(np.asarray(devices), ("grid",))
+
+    @eqx.filter_jit
+    def run(model, settings, x0, wells, fs, amps):
+        def local(fs, amps):
+            return _chunks(model, settings, x0, wells, fs, amps, chunk)
+
+        return jax.shard_map(local, mesh=mesh, in_specs=(P("grid"), P("grid")), out_specs=P("grid"),
+                             check_vma=False)(fs, amps)
+
+    return run
+
+
+def default_chunk(n_dof: int) -> int:
+    """Points per chunk: a power of two near 1280 / dof, within [64, 512] (measured on a CPU:
+    10 DOFs 240 us/point at 128 vs 261 at 256; 3 DOFs 42 at 512 vs 46 at 256)."""
+    return int(np.clip(2 ** round(np.log2(1280 / max(n_dof, 1))), 64, 512))
+
+
+def _traced(settings: SweepSettings) -> SweepSettings:
+    """Every float setting as an array: new tolerances or settle times do not recompile."""
+    return jax.tree.map(lambda v: jnp.asarray(v, float), settings)
+
+
+def _check_inputs(model, f, A, wells, x0):
+    if not isinstance(model, AbstractMechanicalModel):
+        raise GMRInputError(f"basin_map needs a mechanical model (GlobalModel, KreslingChain, ...), got "
+                            f"{type(model).__name__}; load a model file with gmr_jax.load_model")
+    d = model.n_dof
+    f, A = np.asarray(f, float), np.asarray(A, float)
+    for name, v in (("f", f), ("A", A)):
+        if v.ndim != 1 or v.size == 0:
+            raise GMRInputError(f"{name} must be a non-empty 1-D array of grid values, got shape {v.shape}")
+        if not np.all(np.isfinite(v)):
+            raise GMRInputError(f"{name} contains NaN or inf values")
+    if np.any(f <= 0):
+        raise GMRInputError("f must be > 0 (Hz): the half-sine lasts 1/(2f)")
+    wells = np.asarray(wells, float)
+    if wells.ndim != 2 or wells.shape[0] != d:
+        raise GMRInputError(f"wells must be (dof, max_wells) = ({d}, k) for this {d}-DOF model, got shape "
+                            f"{wells.shape}; compute them with gmr_jax.stable_wells(model, x_range)")
+    if np.any(np.all(np.isnan(wells), axis=1)):
+        bad = np.nonzero(np.all(np.isnan(wells), axis=1))[0].tolist()
+        raise GMRInputError(f"no stable well for DOF(s) {bad}: widen the x_range given to stable_wells")
+    if x0 is not None:
+        x0 = np.asarray(x0, float)
+        if x0.shape != (d,) or not np.all(np.isfinite(x0)):
+            raise GMRInputError(f"x0 must be {d} finite deformations (one per DOF), got {x0.tolist()}")
+    return f, A, wells, x0
+
+
+def basin_map(
+    model: AbstractMechanicalModel,
+    f: Float[ArrayLike, " nf"],
+    A: Float[ArrayLike, " na"],
+    wells: Float[ArrayLike, "dof max_wells"],
+    *,
+    x0: Float[ArrayLike, " dof"] | None = None,
+    settings: SweepSettings = SweepSettings(),
+    chunk: int | None = None,
+    devices=None,
+    progress: Callable[[int, int], None] | None = None,
+    throw: bool = True,
+) -> Solution:
+    """Final configuration of the chain under the Eq. (25) half-sine load, over an (f, A) grid.
+
+    **Arguments:**
+
+    - `model`: any mechanical model (reconstructed, hand-written or a truth system).
+    - `f`, `A`: actuation frequencies (Hz) and amplitudes (force units; m/s² for
+      `settings.load="base"`) of the grid.
+    - `wells`: (dof, max_wells) stable equilibria per cell (`stable_wells`), ordered.
+    - `x0`: start (default: every cell in its first well, at rest).
+    - `settings`: `SweepSettings` (tolerances, settling, classification, load, batching).
+    - `chunk`: points integrated together (default `default_chunk(dof)`: 512, 256, 128 points
+      for 3, 5, 10 DOFs, about 1280 state pairs, which keeps a chunk's stages in cache on a CPU;
+      on a GPU try thousands). Points are ordered by (f, A) before chunking, so each chunk holds
+      similar actuations. The integrator's memory is per chunk; what grows with the
+      grid is the returned map and its copies, about 0.6-0.7 kB per point at peak (1e6 points:
+      1.1 GB in all, `results/bench_basins_memory.md`).
+    - `devices`: devices to shard the grid over (default: all of `jax.devices()`); chunks are
+      dealt to a 1-D `shard_map` mesh in turn, so several CPU host devices, GPUs or TPUs (and
+      several hosts after `jax.distributed.initialize()`) share the work evenly.
+    - `progress`: optional `progress(done, total)` called after each block of chunks (the grid
+      then runs in up to ~20 calls of one compiled function).
+
+    - `throw`: raise `GMRComputationError` when the integrator failed on some point (its step
+      budget or step size ran out): those points are not an answer about the model.
+
+    **Returns:** a `Solution` whose `value` is a `BasinMap`. Nothing is silently classified:
+    points that diverged, failed or had not settled at t1 are -1 with their own code in
+    `BasinMap.result`. The Solution's `result` is `successful` unless the integrator failed on
+    some point (then the first such code); a point that `diverged` (left the divergence box) or
+    was `not_settled` is an outcome of the model, counted in `stats["counts"]` (points per
+    code name).
+
+    Compiled shapes depend only on the number of points, `chunk`, the devices and the model's
+    structure: new f, A, settle times, tolerances or coefficient values do not recompile.
+    """
+    f_np, a_np, wells_np, x0_np = _check_inputs(model, f, A, wells, x0)
+    wells = jnp.asarray(wells_np)
+    x0 = wells[:, 0] if x0_np is None else jnp.asarray(x0_np)
+    settings_t = _traced(settings)
+    ff, aa = np.meshgrid(f_np, a_np)  # (NA, NF)
+    flat_f, flat_a = ff.ravel(), aa.ravel()
+    order = np.lexsort((flat_a, flat_f))  # by f, then A: similar actuations share a chunk
+    n = flat_f.size
+    devices = tuple(jax.devices() if devices is None else devices)
+    nd = len(devices)
+    chunk = default_chunk(model.n_dof) if chunk is None else int(chunk)
+    if chunk < 1:
+        raise GMRInputError(f"chunk must be >= 1, got {chunk}")
+    chunk = min(chunk, -(-n // nd))
+    per_dev = -(-n // (chunk * nd))  # chunks per device
+    calls = 1 if progress is None else min(per_dev, 20)
+    k = -(-per_dev // calls)  # chunks per device per call
+    calls = -(-per_dev // k)
+    total = calls * k * nd * chunk
+    pad = np.concatenate([order, np.full(total - n, order[-1])])
+    # call c, device j, slot i holds sorted chunk (c * k + i) * nd + j: devices take turns
+    layout = pad.reshape(calls, k, nd, chunk).transpose(0, 2, 1, 3).reshape(calls, -1)
+    run = None if nd == 1 else _sharded(devices, chunk)
+    multi = jax.process_count() > 1 and run is not None
+    if multi:  # host values, identical in every process, are what a multi-process jit takes
+        model, settings_t, x0, wells = jax.tree.map(
+            lambda a: np.asarray(a) if eqx.is_array(a) else a, (model, settings_t, x0, wells))
+    parts = []
+    for c in range(calls):
+        fs, amps = flat_f[layout[c]], flat_a[layout[c]]  # NumPy: the same global input in every process
+        if run is None:
+            out = _sweep_points(model, settings_t, x0, wells, jnp.asarray(fs), jnp.asarray(amps), chunk)
+        else:
+            out = run(model, settings_t, x0, wells, fs, amps)
+        if multi:  # every process gets the whole map (jax.distributed)
+            from jax.experimental import multihost_utils
+
+            out = multihost_utils.process_allgather(out, tiled=True)
+        parts.append(jax.tree.map(np.asarray, out))
+        if progress is not None:
+            progress(min(n, (c + 1) * k * nd * chunk), n)
+    cat = [np.concatenate([p[j] for p in parts]) for j in range(6)]
+    src = layout.ravel()
+    first = np.full(n, -1)
+    first[src[::-1]] = np.arange(src.size)[::-1]  # first slot holding each point
+    idx, config, code, x1, v1, steps = (o[first] for o in cat)
+    na, nf = a_np.size, f_np.size
+    d = x0.shape[0]
+    bm = BasinMap(f=jnp.asarray(f_np), A=jnp.asarray(a_np), wells=jnp.asarray(idx.reshape(na, nf, d)),
+                  config=jnp.asarray(config.reshape(na, nf)), result=jnp.asarray(code.reshape(na, nf)),
+                  x_final=jnp.asarray(x1.reshape(na, nf, d)), v_final=jnp.asarray(v1.reshape(na, nf, d)),
+                  steps=jnp.asarray(steps.reshape(na, nf)))
+    values, counts = np.unique(code, return_counts=True)
+    stats = {"counts": {code_name(v): int(c) for v, c in zip(values, counts)}, "chunk": chunk, "devices": nd}
+    outcomes = {value_of(n) for n in ("successful", "diverged", "not_settled")}
+    failed = code[~np.isin(code, list(outcomes))]
+    result = as_result(int(failed[0])) if failed.size else RESULTS.successful
+    detail = f"{failed.size} of {n} points: " + ", ".join(f"{k} {c}" for k, c in stats["counts"].items())
+    return raise_if_failed(Solution(value=bm, result=result, stats=stats), throw, "basin_map", detail)
+
+
+def n_chunk_compiles() -> int:
+    """Number of compiled single-device sweep functions (a trace counter for tests)."""
+    return _sweep_points._cached._cache_size()
+

@@ -1,0 +1,88 @@
+"""`gmr actuate MODEL.json --target 0-1-1-0-0 --out DIR`: design the cheapest tip load that deploys the
+chain into the target configuration and verify it (README, "Actuation design")."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .._errors import GMRInputError
+from ._args import interval, x_range
+
+
+def register(sub):
+    """Register the `actuate` subcommand on an argparse subparsers object."""
+    a = sub.add_parser("actuate", help="find the lowest-peak tip load that deploys a chain to a target configuration")
+    a.add_argument("model", help="gmr-model/1 JSON (chain)")
+    a.add_argument("--target", required=True, help="target configuration, cell 0 (base) first, e.g. 0-1-1-0-0")
+    a.add_argument("--out", required=True, help="output folder (writes actuation.json)")
+    a.add_argument("--kind", choices=["half_sine", "samples"], default="half_sine",
+                   help="Eq. (25) half-sine (f, A), or a sampled tip force history")
+    a.add_argument("--f-range", default="0.1:5", help="half-sine frequencies searched, LO:HI (Hz)")
+    a.add_argument("--A-range", default="0.02:1", help="half-sine amplitudes searched, LO:HI (force units)")
+    a.add_argument("--x-range", default=None, help="LO:HI deformation interval to search for wells")
+    a.add_argument("--settle-time", type=float, default=10.0, help="free time after the load (s)")
+    a.add_argument("--objective", choices=["peak", "effort"], default="peak",
+                   help="minimise the peak force (default) or the integral of F^2 dt")
+    a.add_argument("--grid", type=int, default=24, help="seed grid points per axis (default 24)")
+    a.add_argument("--seeds", type=int, default=6, help="seeds refined along the basin boundary (default 6)")
+    a.add_argument("--knots", type=int, default=24, help="samples of the force history (--kind samples)")
+    a.add_argument("--sign-eps", type=float, default=1e-3,
+                   help="sgn(v) -> tanh(v/eps) inside differentiated solves (models with sgn(v) terms)")
+    a.set_defaults(fn=run)
+    return a
+
+
+def run(args):
+    import gmr_jax as gmr
+    from gmr_jax import RESULTS
+    from gmr_jax.plots import config_label
+
+    model = gmr.load_model(args.model)
+    if model.topology.name != "chain":
+        raise GMRInputError("gmr actuate needs a chain model (topology 'chain'): the load is a tip force")
+    if not args.x_range:
+        raise GMRInputError("--x-range=LO:HI is needed: the deformation interval in which to look for wells")
+    lo, hi = x_range(args.x_range)
+    wells = gmr.stable_wells(model, [[lo, hi]] * model.n_dof)
+    if wells.shape[1] < 2 or np.any(np.isnan(wells[:, :2])):
+        raise GMRInputError(f"some cell has fewer than two stable wells in [{lo}, {hi}]: widen --x-range "
+                            "(every cell must be bistable to be actuated)")
+    if args.grid < 2 or args.seeds < 1 or args.knots < 3 or not args.settle_time > 0 or not args.sign_eps > 0:
+        raise GMRInputError("need --grid >= 2, --seeds >= 1, --knots >= 3, --settle-time > 0, --sign-eps > 0")
+    settings = gmr.ActuateSettings(
+        f_range=interval(args.f_range, "f-range", positive=True), A_range=interval(args.A_range, "A-range"),
+        n_f=args.grid, n_A=args.grid, n_seeds=args.seeds, objective=args.objective,
+        sweep=gmr.SweepSettings(settle_time=args.settle_time), sign_eps=args.sign_eps, n_knots=args.knots,
+    )
+    sol = gmr.actuate(model, args.target, kind=args.kind, settings=settings, wells=wells, throw=False)
+    act, st = sol.value, sol.stats
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    reached = bool(sol.result == RESULTS.successful)
+    found = act.f is not None if act.kind == "half_sine" else act.t is not None
+    doc = act.to_json() if found else {"kind": act.kind}
+    d = model.n_dof
+    doc.update({
+        "target": config_label(int(st["target_config"]), d),
+        "reached": reached,
+        "final_wells": st["verified_wells"],
+        "final_config": config_label(int(st["verified_config"]), d),
+        "result": RESULTS[sol.result] if not reached else "",
+        "solves": st["solves"],
+        "gradient_evaluations": st["gradient_evaluations"],
+        "objective": args.objective,
+    })
+    (out / "actuation.json").write_text(json.dumps(doc, indent=1) + "\n")
+    if act.kind == "half_sine" and act.f is not None:
+        desc = f"half-sine f = {act.f:.6g} Hz, A = {act.A:.6g}"
+    elif act.t is not None:
+        desc = f"{len(act.t)}-sample tip force over {act.t[-1]:.4g} s"
+    else:
+        desc = "none"
+    print(f"gmr actuate: target {doc['target']}: {desc}; peak {act.peak:.6g}, effort {act.effort:.6g}; "
+          f"verified final configuration {doc['final_config']} ({'reached' if reached else 'NOT reached'}); "
+          f"{st['solves']} ODE solves")
+    print(f"wrote {out}/actuation.json")
+    return 0 if reached else 1
+

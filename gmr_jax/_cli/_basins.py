@@ -1,0 +1,91 @@
+"""`gmr basins MODEL.json --f F0:F1:NF --A A0:A1:NA --out DIR` (contracts, "Basin map")."""
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .._errors import GMRInputError
+from ._args import grid, positive_int, start_configuration, x_range
+
+
+def register(sub):
+    b = sub.add_parser("basins", help="deployment basins over an (f, A) grid of the Eq. (25) tip half-sine")
+    b.add_argument("model", help="gmr-model/1 JSON")
+    b.add_argument("--f", required=True, help="frequencies START:STOP:NUM (Hz)")
+    b.add_argument("--A", required=True, help="amplitudes START:STOP:NUM (force units)")
+    b.add_argument("--x-range", default=None, help="LO:HI deformation interval to search for wells")
+    b.add_argument("--settle-time", type=float, default=10.0, help="free time after the load (s)")
+    b.add_argument("--load", choices=["tip", "base"], default="tip",
+                   help="tip: force A sin(2 pi f t) on the last mass (Eq. 25, default); base: the same half-sine "
+                   "as base acceleration (A in m/s^2)")
+    b.add_argument("--start", default=None, help="start configuration, e.g. 0-0-0-0-0 (default: every DOF in its "
+                   "first well)")
+    b.add_argument("--rtol", type=float, default=1e-6)
+    b.add_argument("--atol", type=float, default=1e-8)
+    b.add_argument("--batching", choices=["joint", "member"], default="joint",
+                   help="joint: each chunk as one ODE with a shared step (default, faster); member: one solve per point")
+    b.add_argument("--chunk", type=positive_int, default=None,
+                   help="points integrated together (default: about 1280 / DOFs, 64-512)")
+    b.add_argument("--cpu-devices", type=positive_int, default=None,
+                   help="CPU cores to shard over (default: all; ignored on GPU/TPU)")
+    b.add_argument("--out", required=True)
+    b.set_defaults(fn=run)
+    return b
+
+
+def run(args) -> int:
+    import gmr_jax as gmr
+
+    n_cpu = gmr.use_cpu_cores(args.cpu_devices, strict=False)  # before any JAX computation
+    import jax
+
+    from ..plots import basin_figure, config_label
+
+    model = gmr.load_model(args.model)
+    f, A = grid(args.f, "f"), grid(args.A, "A")
+    if not args.x_range:
+        raise GMRInputError("--x-range=LO:HI is needed: the deformation interval in which to look for wells")
+    lo, hi = x_range(args.x_range)
+    wells = gmr.stable_wells(model, [[lo, hi]] * model.n_dof)
+    if np.any(np.isnan(wells[:, 0])):
+        raise GMRInputError(f"no stable equilibrium found in [{lo}, {hi}] for some DOF: widen --x-range")
+    x0 = start_configuration(args.start, wells)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    settings = gmr.SweepSettings(settle_time=args.settle_time, load=args.load, batching=args.batching,
+                                 integrator=gmr.Integrator(rtol=args.rtol, atol=args.atol, max_steps=100_000))
+    n = f.size * A.size
+    devs = jax.devices()
+    print(f"gmr basins: {n} points ({A.size} amplitudes x {f.size} frequencies), {args.load} half-sine (Eq. 25), "
+          f"wells per DOF: {[np.round(w[~np.isnan(w)], 6).tolist() for w in wells]}; "
+          f"{len(devs)} {devs[0].platform} device(s)" + (f" ({n_cpu} CPU cores)" if devs[0].platform == "cpu" else ""))
+    t0 = time.perf_counter()
+
+    def progress(done, total):
+        k = int(40 * done / total)
+        print(f"\r  [{'#' * k}{'.' * (40 - k)}] {done}/{total} points, {time.perf_counter() - t0:.0f} s",
+              end="", flush=True)
+
+    sol = gmr.basin_map(model, f, A, wells, x0=x0, settings=settings, chunk=args.chunk, progress=progress,
+                        throw=False)
+    bm = sol.value
+    wall = time.perf_counter() - t0
+    print()
+    cat = {key: np.asarray(getattr(bm, key)) for key in ("wells", "config", "result", "x_final", "v_final", "steps")}
+    np.savez(out / "basins.npz", f=f, A=A, **cat)
+    basin_figure(f, A, cat["config"], model.n_dof, out / "basins.png",
+                 title=f"{Path(args.model).stem}: final configuration, {args.load} half-sine (Eq. 25)")
+    vals, counts = np.unique(cat["config"], return_counts=True)
+    for v, c in zip(vals, counts):
+        print(f"  {config_label(int(v), model.n_dof):22s} {c:7d} points")
+    bad = cat["config"] < 0
+    if np.any(bad):
+        from .._solution import code_name
+
+        codes, cc = np.unique(cat["result"][bad], return_counts=True)
+        why = ", ".join(f"{c} {code_name(k).replace('_', ' ')}" for k, c in zip(codes, cc))
+        print(f"  -1 (not classified): {why}")
+    print(f"{n} points in {wall:.1f} s ({n / wall:.0f} trajectories/s, compile included)")
+    print(f"wrote {out}/basins.npz and basins.png")
+    return 0

@@ -1,0 +1,73 @@
+"""`gmr refine MODEL.json REC.npz [...] --out REFINED.json`: output-error refinement of a model."""
+
+import numpy as np
+
+from .._errors import GMRInputError
+
+
+def register(sub):
+    r = sub.add_parser("refine", help="refine a model's coefficients on recordings (multiple shooting, "
+                       "Levenberg-Marquardt through the simulations)")
+    r.add_argument("model", help="gmr-model/1 JSON (e.g. from gmr fit)")
+    r.add_argument("recordings", nargs="+", help="training recordings (NPZ or CSV)")
+    r.add_argument("--out", required=True, help="refined model JSON to write (gmr-model/1)")
+    r.add_argument("--holdout", nargs="+", default=None, help="recordings to report the output error on")
+    r.add_argument("--free", default="all", help="coefficients to fit: all (every nonzero term; default), "
+                   "stiffness, damping, velocity_damping, position_damping, or a comma-separated list")
+    r.add_argument("--window", type=float, default=1.0, help="shooting window length in s (default 1)")
+    r.add_argument("--max-iterations", "--max-steps", dest="max_iterations", type=int, default=50,
+                   help="least-squares solver iterations (default 50)")
+    r.add_argument("--stride", type=int, default=1, help="use every STRIDE-th sample in the residuals")
+    r.add_argument("--max-windows", type=int, default=None, help="at most this many windows per recording")
+    r.add_argument("--solver", choices=["lm", "gauss-newton"], default="lm")
+    r.set_defaults(fn=run)
+    return r
+
+
+def run(args) -> int:
+    import optimistix as optx
+
+    import gmr_jax as gmr
+    from gmr_jax import RESULTS
+
+    from .._solution import code_name
+
+    if args.max_iterations < 1 or args.stride < 1 or (args.max_windows is not None and args.max_windows < 1):
+        raise GMRInputError("--max-iterations, --stride and --max-windows must be >= 1")
+    if not (np.isfinite(args.window) and args.window > 0):
+        raise GMRInputError(f"--window must be a positive number of seconds, got {args.window}")
+    model = gmr.load_model(args.model)
+    train = [gmr.load_recording(p) for p in args.recordings]
+    hold = [gmr.load_recording(p) for p in args.holdout] if args.holdout else None
+    solver = (optx.LevenbergMarquardt(rtol=1e-6, atol=1e-8) if args.solver == "lm"
+              else optx.GaussNewton(rtol=1e-6, atol=1e-8))
+    settings = gmr.RefineSettings(window=args.window, solver=solver, max_iterations=args.max_iterations,
+                                  stride=args.stride, max_windows=args.max_windows)
+    sol = gmr.refine(model, train, free=args.free, settings=settings, holdout=hold, throw=False)
+    st = sol.stats
+    ok = sol.result == RESULTS.successful
+    report = {"train": {k: v.as_dict() for k, v in st["train"].items()},
+              "holdout": None if st["holdout"] is None else {k: v.as_dict() for k, v in st["holdout"].items()},
+              "iterations": st["iterations"], "result": "successful" if ok else RESULTS[sol.result],
+              "free": [list(t) for t in st["free"]]}
+    print(f"gmr refine: {len(st['free'])} free coefficient(s), {st['windows']} window(s) of {args.window} s, "
+          f"{st['iterations']} iteration(s)")
+    for name in ("train", "holdout"):
+        e = st[name]
+        if e is not None:
+            print(f"  {name} NRMSE: {e['before'].nrmse:.4g} -> {e['after'].nrmse:.4g} "
+                  f"(failed windows {e['before'].failed} -> {e['after'].failed} of {e['after'].windows})")
+    if sol.result == RESULTS.nonlinear_max_steps_reached:
+        ok = True  # still an improved model: write it, but say so
+        print(f"gmr refine: warning: the solver used all {args.max_iterations} iterations without meeting its "
+              f"tolerance (raise --max-iterations); writing the last iterate")
+        report["result"] = "max_steps_reached"
+    if not ok:
+        print(f"gmr refine: error: {RESULTS[sol.result]} [{code_name(sol.result)}]; the model was not written",
+              flush=True)
+        return 1
+    gmr.save_model(sol.value, args.out, method="refined", refinement=report)
+    for line in sol.value.equations():
+        print("  " + line)
+    print(f"wrote {args.out}")
+    return 0

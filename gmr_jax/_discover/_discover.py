@@ -1,0 +1,336 @@
+"""`discover`: find the physics a simulation model left out, from recordings that disagree with it.
+
+Steps (per DOF / cell):
+
+1. **Locate**: the equation-error residual of the given model on the estimation recordings
+   (`_locate.locate`: (x, v) map, speed/displacement concentration, time, frequency, residual
+   tests).
+2. **Name**: regress the residual (`_equation.dof_rows`, strong or weak form) on the model's own
+   basis functions (re-calibration, always allowed; plus the mass for independent DOFs) and on
+   the catalogue of candidate physics (`_catalogue.default_catalogue`), selecting the new physics
+   by the rule of `_select.select_terms` (blocked validation gain, Bonferroni-bounded F-test on
+   the effective sample size, bootstrap stability >= 80 %).
+3. **Model and show**: the augmented model (corrections added to the model's coefficients, new
+   terms appended) and the error before/after on the holdout recordings: output (simulation)
+   error NRMSE ||x_sim - x|| / ||x - mean x|| when both models can be simulated under the
+   recorded inputs (low-passed at 1.5 x their band edge, `smooth_input`) from the recorded
+   initial state, else equation error ||r|| / ||y|| (y the
+   force the DOF carries). The report states which.
+"""
+
+from dataclasses import dataclass, field
+
+import jax.numpy as jnp
+import numpy as np
+from scipy.signal import butter, filtfilt
+
+from .._errors import GMRInputError
+from .._solution import RESULTS, Solution, raise_if_failed
+from .._model._model import GlobalModel, from_terms
+from .._recordings._derivatives import auto_window, band_edge
+from .._recordings._recording import Recording, validate
+from .._simulate._inputs import Sampled
+from .._simulate._integrate import Integrator
+from .._simulate._simulate import simulate
+from ._catalogue import PLAIN, Term, default_catalogue, model_terms
+from ._equation import dof_rows
+from ._locate import locate, where_sentence
+from ._select import SelectionRule, select_terms
+
+SIM = Integrator(rtol=1e-7, atol=1e-10, max_steps=400_000)
+
+
+@dataclass
+class DiscoveryReport:
+    """What `discover` found. `findings` / `corrections` are contract dicts; `before` / `after`
+    the holdout errors; `model` the augmented `GlobalModel`; `location` per DOF (before/after);
+    `selection` per DOF (the rule's steps, stability, rejected candidates); `settings`."""
+
+    findings: list
+    corrections: list
+    before: dict
+    after: dict
+    model: GlobalModel
+    given: GlobalModel
+    location: list
+    selection: list
+    settings: dict
+    series: dict = field(default_factory=dict, repr=False)
+
+    def to_dict(self, model_file: str = "augmented_model.json") -> dict:
+        """The Discovery report JSON of the contracts (plus optional extra keys)."""
+        return {
+            "findings": self.findings,
+            "before": self.before,
+            "after": self.after,
+            "model": model_file,
+            "corrections": self.corrections,
+            "summary": self.summary(),
+            "selection": self.selection,
+            "location": self.location,
+            "settings": self.settings,
+        }
+
+    def summary(self) -> str:
+        from ._report import summary
+
+        return summary(self)
+
+
+def _pct(a):
+    return f"{100 * a:.3g} %"
+
+
+def smooth_input(u: np.ndarray, dt: float) -> np.ndarray:
+    """Measured input without its broadband noise: zero-phase Butterworth (order 4) low-pass at
+    1.5 x the input's band edge (99.5 % of its power below); a white measurement noise on the
+    input would otherwise drive the simulated resonances. Columns that are zero stay zero."""
+    u = np.asarray(u, float)
+    if u.ndim == 1:
+        return smooth_input(u[:, None], dt)[:, 0]
+    out = u.copy()
+    for k in range(u.shape[1]):
+        if np.std(u[:, k]) == 0:
+            continue
+        fc = 1.5 * band_edge(u[:, k], dt)
+        if 0 < fc < 0.45 / dt:
+            bb, aa = butter(4, fc * 2 * dt)
+            out[:, k] = filtfilt(bb, aa, u[:, k])
+    return out
+
+
+def _simulate_x(model, rec: Recording, eps):
+    d = model.n_dof
+    b, f = rec.inputs()
+    b, f = smooth_input(b, rec.dt), smooth_input(f, rec.dt)
+    k = sim_start(rec)
+    inp = Sampled(jnp.asarray(rec.t), jnp.asarray(b), jnp.asarray(f), n_dof=d)
+    sol = simulate(model.with_sign_eps(eps), inp, jnp.asarray(rec.t[k:]), jnp.asarray(rec.x[k]),
+                   jnp.asarray(rec.v[k]), integrator=SIM, throw=False)
+    x = np.asarray(sol.value[0])
+    return x if np.all(np.isfinite(x)) else None
+
+
+def sim_start(rec: Recording) -> int:
+    """First sample of the output-error simulation: half a Savitzky-Golay window in, where an
+    estimated v is an interior (not extrapolated) estimate; 0 when v was recorded."""
+    if "v" not in rec.derived:
+        return 0
+    w = max(auto_window(rec.x[:, i], rec.dt) for i in range(rec.n_dof))
+    return int(min(w // 2 + 1, rec.n_samples // 10))
+
+
+def _has_restoring(model) -> bool:
+    k = np.asarray(model.stiffness)
+    return k.shape[1] > 1 and bool(np.all(np.any(k[:, 1:] != 0, axis=1)))
+
+
+def holdout_errors(model, recs, settings: dict, error: str = "auto") -> dict:
+    """Equation error (and output error when it can simulate) of `model` on completed `recs`."""
+    eq_num = eq_den = 0.0
+    per_dof = np.zeros((model.n_dof, 2))
+    for r in recs:
+        for i in range(model.n_dof):
+            rows = dof_rows(r, model, i, [], form=settings["form"], support=settings["support"],
+                            decimate=settings["decimate"])
+            per_dof[i] += (rows.y @ rows.y, rows.scale)
+            eq_num += rows.y @ rows.y
+            eq_den += rows.scale
+    out = {"equation_nrmse": float(np.sqrt(eq_num / eq_den)),
+           "equation_nrmse_per_dof": np.sqrt(per_dof[:, 0] / per_dof[:, 1]).tolist()}
+    if error in ("auto", "output") and _has_restoring(model):
+        num = den = 0.0
+        sims = []
+        for r in recs:
+            eps = 1e-3 * float(np.sqrt(np.mean(r.v**2)))
+            x = _simulate_x(model, r, eps)
+            if x is None:
+                sims = None
+                break
+            sims.append(x)
+            xm = r.x[sim_start(r):]
+            num += np.sum((x - xm) ** 2)
+            den += np.sum((xm - xm.mean(0)) ** 2)
+        if sims is not None:
+            out["output_nrmse"] = float(np.sqrt(num / den))
+            out["_sims"] = sims
+    return out
+
+
+def _augment(model: GlobalModel, corrections, new_terms, mass_corr) -> GlobalModel:
+    terms = model.terms() + [dict(c) for c in corrections] + [dict(t) for t in new_terms]
+    masses = np.asarray(model.masses) + mass_corr
+    return from_terms(masses, [{k: t[k] for k in ("dof", "physics", "order", "coefficient")} for t in terms],
+                      model.topology)
+
+
+def discover(
+    model: GlobalModel,
+    recordings: list[Recording],
+    holdout: list[Recording] = (),
+    *,
+    catalogue: list[Term] | None = None,
+    rule: SelectionRule = SelectionRule(),
+    form: str = "auto",
+    support: int | None = None,
+    decimate: int = 1,
+    refit_masses: bool | None = None,
+    error: str = "auto",
+    throw: bool = True,
+) -> Solution:
+    """Find the physics `model` left out, from `recordings`; show the fit on `holdout`.
+
+    **Arguments:**
+
+    - `model`: a `GlobalModel` (gmr-model/1: reconstructed or hand-written; its masses are used).
+    - `recordings`: estimation recordings (missing v/a are estimated by Savitzky-Golay; supply
+      them to use your own derivatives). `holdout`: recordings not used to find anything
+      (default: the estimation recordings, stated in the report).
+    - `catalogue`: candidate `Term`s (default `default_catalogue`); terms already in the model
+      are re-calibration columns, not candidates.
+    - `rule`: the selection rule (`SelectionRule`; see `_select`).
+    - `form`: "strong", "weak" (test-function integrals, no acceleration needed) or "auto"
+      (weak when any `a` was estimated, strong otherwise).
+    - `support`: weak-form test-function support in samples (default: one period at the band
+      edge). `decimate`: strong form, low-pass and decimate the regression columns in parallel.
+    - `refit_masses`: let the masses move in the re-calibration (default: independent topology).
+    - `error`: "auto" (output error when both models simulate, else equation error),
+      "output" or "equation".
+
+    - `throw`: raise `GMRComputationError` on a numerical failure (a non-finite fit).
+
+    **Returns:** a `Solution` whose `value` is the `DiscoveryReport` (findings, corrections,
+    before/after, the augmented model), `result` `successful` or `nonfinite`, and `stats` with
+    the number of findings and the error measure used.
+    """
+    if not recordings:
+        raise GMRInputError("discover: no recordings given")
+    d = model.n_dof
+    recs = [validate(r, r.name) for r in recordings]
+    hold = [validate(r, r.name) for r in holdout] if holdout else []
+    for r in recs + hold:
+        if r.n_dof != d:
+            raise GMRInputError(f"{r.name}: has {r.n_dof} DOFs but the model has {d}")
+    estimated = any(r.a is None or "a" in r.derived for r in recs)
+    if form == "auto":
+        form = "weak" if (estimated and decimate == 1) else "strong"
+    if form not in ("strong", "weak"):
+        raise GMRInputError(f"discover: form must be 'strong', 'weak' or 'auto', got {form!r}")
+    if error not in ("auto", "output", "equation"):
+        raise GMRInputError(f"discover: error must be 'auto', 'output' or 'equation', got {error!r}")
+    if refit_masses is None:
+        refit_masses = model.topology.name == "independent"
+    if refit_masses and model.topology.name != "independent":
+        raise GMRInputError("discover: refit_masses needs the independent topology (chain masses "
+                            "enter several cells' equations)")
+    recs = [r.complete(model.topology) for r in recs]
+    hold_c = [r.complete(model.topology) for r in hold] if hold else recs
+    catalogue = default_catalogue(d) if catalogue is None else list(catalogue)
+    settings = {"form": form, "support": support, "decimate": int(decimate),
+                "refit_masses": bool(refit_masses), "derivatives":
+                "recorded" if not estimated else "Savitzky-Golay (quintic, automatic window) for "
+                "the missing signals" + ("; weak form: no acceleration used" if form == "weak" else ""),
+                "rule": rule.__dict__, "holdout": [r.name for r in hold] or "estimation recordings "
+                "(no holdout given)", "estimation": [r.name for r in recs]}
+
+    findings, corrections, location, selection = [], [], [], []
+    new_terms, mass_corr = [], np.zeros(d)
+    series = {"resid_before": [], "resid_after": [], "x": [], "v": [], "t": []}
+    for i in range(d):
+        base = model_terms(model, i)
+        cands = [t for t in catalogue if t.dof == i and t not in base
+                 and not (t.family == "position_damping" and t.order == 0)]
+        terms = base + cands
+        rows = [dof_rows(r, model, i, terms, form=form, support=support, decimate=decimate,
+                         mass_column=refit_masses) for r in recs]
+        y = np.concatenate([r.y for r in rows])
+        X = np.concatenate([r.columns for r in rows])
+        Xb = X[:, : len(base)]
+        if refit_masses:
+            Xb = np.concatenate([np.concatenate([r.mass for r in rows])[:, None], Xb], 1)
+        sel = select_terms(Xb, X[:, len(base):], y, rule)
+        off = 1 if refit_masses else 0
+        if refit_masses:
+            mass_corr[i] = sel.coef_base[0]
+            corrections.append({"dof": i, "physics": "mass", "coefficient": float(sel.coef_base[0]),
+                                "ci95": sel.ci_base[0].tolist(),
+                                "model_value": float(np.asarray(model.masses)[i])})
+        given = {(t["physics"], t["order"]): t["coefficient"] for t in model.terms() if t["dof"] == i}
+        for k, t in enumerate(base):
+            c = float(sel.coef_base[off + k])
+            corrections.append({"dof": i, "physics": t.physics, "family": t.family, "order": t.order,
+                                "coefficient": c, "ci95": sel.ci_base[off + k].tolist(),
+                                "model_value": float(given.get((t.family, t.order),
+                                                               given.get(("position_damping", 0), 0.0)))})
+        # location of the given model's residual (strong form, per sample)
+        strong = [dof_rows(r, model, i, [], form="strong", decimate=decimate) for r in recs]
+        loc_b = locate(np.concatenate([s.y for s in strong]), np.concatenate([s.x for s in strong]),
+                       np.concatenate([s.v for s in strong]), recs[0].dt * max(decimate, 1),
+                       np.concatenate([s.u for s in strong]))
+        series["resid_before"].append(np.concatenate([s.y for s in strong]))
+        series["x"].append(np.concatenate([s.x for s in strong]))
+        series["v"].append(np.concatenate([s.v for s in strong]))
+        series["dt"] = recs[0].dt * max(decimate, 1)
+        for k, j in enumerate(sel.kept):
+            t = cands[j]
+            f = {"dof": i, "physics": t.physics, "coefficient": float(sel.coef_kept[k]),
+                 "ci95": sel.ci_kept[k].tolist(), "explained_fraction": float(sel.explained[k]),
+                 "where": where_sentence(loc_b, t.physics)}
+            if t.family == "position_damping":
+                f["order"] = t.order
+            step = [s for s in sel.steps if s["candidate"] == j][0]
+            f.update({"basis": t.label, "unit": t.unit, "plain": PLAIN.get(t.physics, t.physics),
+                      "stability": float(sel.stability[j]), "p_value": step["p_value"],
+                      "cv_gain": step["cv_gain"]})
+            findings.append(f)
+            new_terms.append(t.model_term(sel.coef_kept[k]))
+        selection.append({
+            "dof": i, "form": form, "rows": sel.n_rows, "tau_rows": sel.tau,
+            "recalibration_terms": (["mass"] if refit_masses else []) + [t.label for t in base],
+            "candidates": [t.physics + (f"_{t.order}" if t.family == "position_damping" else "")
+                           for t in cands],
+            "steps": [dict(s, candidate=cands[s["candidate"]].label) for s in sel.steps],
+            "stability": {cands[j].label: float(sel.stability[j]) for j in range(len(cands))},
+            "rejected": [{"term": cands[j].label, "physics": cands[j].physics, "reason": why}
+                         for j, why in sel.rejected],
+            "explained_by_recalibration": float(sel.explained_base),
+            "explained_total": float(sel.explained_total),
+        })
+        location.append({"dof": i, "before": loc_b})
+
+    corr_terms = [{"dof": c["dof"], "physics": c["family"], "order": c["order"],
+                   "coefficient": c["coefficient"]} for c in corrections if c["physics"] != "mass"]
+    aug = _augment(model, corr_terms, new_terms, mass_corr)
+    for i in range(d):
+        strong = [dof_rows(r, aug, i, [], form="strong", decimate=decimate) for r in recs]
+        ra = np.concatenate([s.y for s in strong])
+        location[i]["after"] = locate(ra, np.concatenate([s.x for s in strong]),
+                                      np.concatenate([s.v for s in strong]), series["dt"],
+                                      np.concatenate([s.u for s in strong]))
+        series["resid_after"].append(ra)
+    before = holdout_errors(model, hold_c, settings, error)
+    after = holdout_errors(aug, hold_c, settings, error)
+    use_output = error != "equation" and "output_nrmse" in before and "output_nrmse" in after
+    if error == "output" and not use_output:
+        raise GMRInputError("discover: error='output' but a model could not be simulated on the holdout")
+    kind = "output" if use_output else "equation"
+    for f in findings:
+        drop = [t for t, g in zip(new_terms, findings) if g is not f]
+        m_wo = _augment(model, corr_terms, drop, mass_corr)
+        e = holdout_errors(m_wo, hold_c, settings, "equation" if kind == "equation" else error)
+        e.pop("_sims", None)
+        f["holdout_without"] = e["output_nrmse"] if kind == "output" and "output_nrmse" in e else e["equation_nrmse"]
+    series["holdout"] = hold_c
+    series["sims"] = (before.pop("_sims", None), after.pop("_sims", None))
+    for e in (before, after):
+        e["kind"] = kind
+        e["nrmse"] = e["output_nrmse"] if use_output else e["equation_nrmse"]
+        e["on"] = "holdout" if hold else "estimation (no holdout given)"
+    report = DiscoveryReport(findings, corrections, before, after, aug, model, location, selection,
+                             settings, series)
+    finite = all(np.all(np.isfinite(np.asarray(getattr(aug, k)))) for k in
+                 ("masses", "stiffness", "velocity_damping", "position_damping"))
+    result = RESULTS.successful if finite else RESULTS.nonfinite
+    stats = {"findings": len(findings), "kind": kind, "form": form}
+    return raise_if_failed(Solution(value=report, result=result, stats=stats), throw, "discover",
+                           "the augmented model has non-finite coefficients")

@@ -1,0 +1,149 @@
+"""Equation-error regression rows: the model's force residual against candidate basis functions.
+
+For DOF i the equation of motion (contracts) gives the force the DOF carries,
+y_i = f_i - m_i a_i (independent) or sum_{k>=i} (f_k - m_k a_k) (chain), and the residual of a
+model is r_i = y_i - F_i(x_i, v_i). A correction sum_j c_j phi_j(x_i, v_i) of the model's force
+(re-calibrated existing terms plus new physics) is fitted to r_i by least squares, in one of two
+forms:
+
+- **strong** (`form="strong"`): one row per sample, with the measured or estimated v and a.
+  `decimate=q > 1` low-passes and decimates every column and the target together (zero-phase
+  Chebyshev, as `scipy.signal.decimate`; the EMPS benchmark's "parallel filtering"), which
+  removes disturbances above the new Nyquist frequency from both sides alike.
+- **weak** (`form="weak"`, the default when `a` was estimated): the equation is integrated
+  against compactly supported test functions psi_k(t) = (1 - s^2)^4, s = (t - c_k)/h, so that
+  the inertia needs no acceleration: int a psi dt = int x_rel psi'' dt + int base_acc psi dt
+  (integration by parts twice; psi, psi' vanish at the ends of the support). Rows are the
+  integrals over overlapping supports (stride = 1/4 of the support). The basis functions still use
+  x and v (v from Savitzky-Golay when not recorded), but no second derivative of noisy data
+  is taken. (Weak SINDy: Messenger & Bortz, J. Comput. Phys. 2021.)
+"""
+
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from scipy.signal import decimate as _decimate
+
+from .._reconstruct._reconstruct import regression_targets
+from .._recordings._derivatives import band_edge
+from ._catalogue import Term, basis
+
+WEAK_POWER = 4
+
+
+@dataclass
+class Rows:
+    """Regression rows of one DOF from one recording: target `y` (rows,), `columns` (rows,
+    n_terms) for `terms`, and `mass` (rows,) the column of a mass correction (independent
+    topology; None for a chain)."""
+
+    y: np.ndarray
+    columns: np.ndarray
+    mass: np.ndarray | None
+    target: np.ndarray | None = None  # the force the DOF carries (y + model force)
+    x: np.ndarray | None = None  # strong form: the DOF's x, v and input at the rows
+    v: np.ndarray | None = None
+    u: np.ndarray | None = None
+    scale: float = 1.0  # squared norm of the applied force rows (inertia rows if no force)
+
+
+def model_force(model, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """F(x, v) of every DOF at every sample (N, D)."""
+    return np.asarray(jax.vmap(model.force)(jnp.asarray(x), jnp.asarray(v)))
+
+
+def test_functions(support: int, dt: float):
+    """psi, psi'' sampled on `support` points (the bump (1 - s^2)^4 on [-1, 1]), in 1/s^2 for
+    psi''; both vanish with their first derivative at the ends."""
+    s = np.linspace(-1.0, 1.0, support)
+    h = 0.5 * (support - 1) * dt
+    p = WEAK_POWER
+    u = 1.0 - s**2
+    psi = u**p
+    d2 = (p * (p - 1) * u ** (p - 2) * 4 * s**2 - 2 * p * u ** (p - 1)) / h**2
+    return psi, d2
+
+
+def weak_support(x: np.ndarray, dt: float) -> int:
+    """Default support of the test functions (samples): one period at the band edge of x (the
+    frequency below which 99.5 % of its power lies), at least 15 samples, odd."""
+    f = max(band_edge(x - x.mean(0), dt) if x.ndim == 1 else
+            max(band_edge(x[:, k], dt) for k in range(x.shape[1])), 1e-12)
+    n = int(round(1.0 / (f * dt)))
+    n = max(15, min(n, x.shape[0] // 4))
+    return n | 1
+
+
+def _integrate(sig: np.ndarray, kernel: np.ndarray, stride: int, dt: float) -> np.ndarray:
+    """Rows int sig psi dt over every window (start 0, stride), trapezoid = sum (psi ends are 0)."""
+    w = sliding_window_view(sig, kernel.size, axis=0)[::stride]  # (K, ..., L)
+    return np.tensordot(w, kernel, axes=([-1], [0])) * dt
+
+
+def _pdecimate(a: np.ndarray, q: int, trim: int) -> np.ndarray:
+    out = _decimate(a, q, ftype="iir", zero_phase=True, axis=0)
+    return out[trim: out.shape[0] - trim]
+
+
+def dof_rows(
+    rec,
+    model,
+    dof: int,
+    terms: list[Term],
+    *,
+    form: str = "strong",
+    support: int | None = None,
+    decimate: int = 1,
+    mass_column: bool = False,
+) -> Rows:
+    """Rows of DOF `dof` from one completed recording (x, v and a present) for `terms`.
+
+    The target is the residual of `model`; a mass column is the correction direction of the
+    DOF's mass (independent topology only)."""
+    masses = np.asarray(model.masses)
+    topo = model.topology
+    x, v = rec.x, rec.v
+    F = model_force(model, x, v)[:, dof]
+    cols = np.stack([basis(t, x[:, t.dof], v[:, t.dof]) for t in terms], 1) if terms else np.zeros((x.shape[0], 0))
+    if form == "strong":
+        tgt = regression_targets(rec, masses, topo)[:, dof]
+        applied = regression_targets(rec, np.zeros_like(masses), topo)[:, dof]
+        y = tgt - F
+        m = rec.a[:, dof] if mass_column else None
+        b, f = rec.inputs()
+        u = b if rec.base_acc is not None else f[:, -1]
+        xd, vd = x[:, dof], v[:, dof]
+        if decimate > 1:
+            trim = 5
+            y, tgt, xd, vd, u, applied = (_pdecimate(z, decimate, trim)
+                                          for z in (y, tgt, xd, vd, u, applied))
+            cols = _pdecimate(cols, decimate, trim) if cols.shape[1] else np.zeros((y.shape[0], 0))
+            m = None if m is None else _pdecimate(m, decimate, trim)
+        return Rows(y, cols, m, tgt, xd, vd, u, _scale(applied, applied - tgt))
+    if form != "weak":
+        raise ValueError(f"form must be 'strong' or 'weak', got {form!r}")
+    dt = rec.dt
+    L = support or weak_support(x, dt)
+    psi, d2 = test_functions(L, dt)
+    stride = max(1, L // 4)
+    b, f = rec.inputs()
+    rel = topo.displacements(x)  # displacement of each mass vs the base
+    # int a_k psi = int rel_k psi'' + int base_acc psi
+    acc = _integrate(rel, d2, stride, dt) + _integrate(b, psi, stride, dt)[:, None]  # (K, D)
+    inert = acc * masses[None, :]
+    fw = _integrate(f, psi, stride, dt)
+    tgt = topo.carried(fw - inert)[:, dof]
+    applied = topo.carried(fw)[:, dof]
+    y = tgt - _integrate(F, psi, stride, dt)
+    cw = _integrate(cols, psi, stride, dt) if cols.shape[1] else np.zeros((y.shape[0], 0))
+    return Rows(y, cw, acc[:, dof] if mass_column else None, tgt, scale=_scale(applied, applied - tgt))
+
+
+def _scale(applied, inertia) -> float:
+    """Squared norm for relative equation errors: the applied force (the EMPS benchmark's
+    ||tau||), or the inertial force when no force is applied (base excitation)."""
+    a = float(applied @ applied)
+    return a if a > 0 else float(inertia @ inertia)

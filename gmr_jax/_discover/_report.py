@@ -1,0 +1,47 @@
+"""The readable summary of a `DiscoveryReport` (its figures: `gmr_jax.plots.discovery_figures`)."""
+
+
+
+from ._catalogue import PLAIN
+
+
+def _cell(report, i):
+    return f"cell {i}" if report.given.topology.name == "chain" else ("DOF 0" if report.given.n_dof == 1 else f"DOF {i}")
+
+
+def _g(x):
+    return f"{x:.4g}"
+
+
+def summary(report) -> str:
+    """Plain-words summary: one sentence per finding, with evidence and uncertainty."""
+    b, a = report.before, report.after
+    kind = "simulation (output) error" if b["kind"] == "output" else "equation (force) error"
+    err = f"{b['on']} {kind} NRMSE {100 * b['nrmse']:.3g} % -> {100 * a['nrmse']:.3g} %"
+    lines = []
+    for f in report.findings:
+        lo, hi = f["ci95"]
+        unit = f.get("unit", "")
+        order = f" (order {f['order']})" if "order" in f else ""
+        lines.append(
+            f"{_cell(report, f['dof'])}: {PLAIN.get(f['physics'], f['physics'])}{order}, "
+            f"{f.get('basis', '')} coefficient {_g(f['coefficient'])} {unit} "
+            f"(95 % CI {_g(lo)} to {_g(hi)}), was left out; with the re-calibrated terms it explains "
+            f"{100 * f['explained_fraction']:.0f} % of the model's equation-error residual on its own "
+            f"(drop-one); {f['where']}; kept in {100 * f['stability']:.0f} % of bootstrap replicates, "
+            f"p = {f['p_value']:.2g}, validation gain {100 * f['cv_gain']:.1f} %; {err}.")
+    if not report.findings:
+        lines.append(f"Nothing missing: no candidate physics passed the selection rule on any "
+                     f"{'cell' if report.given.topology.name == 'chain' else 'DOF'}; {err}.")
+    for c in report.corrections:
+        lo, hi = c["ci95"]
+        mv = c["model_value"]
+        if mv != 0 and not (lo <= 0 <= hi):
+            what = "mass" if c["physics"] == "mass" else f"{c['physics']} ({c.get('family')} {c.get('order')})"
+            lines.append(f"  re-calibration, {_cell(report, c['dof'])}: {what} {_g(mv)} -> "
+                         f"{_g(mv + c['coefficient'])} (correction {_g(c['coefficient'])}, 95 % CI "
+                         f"{_g(lo)} to {_g(hi)})")
+    for s in report.selection:
+        for r in s["rejected"]:
+            lines.append(f"  not reported, {_cell(report, s['dof'])}: {r['physics']} ({r['term']}): {r['reason']}")
+    return "\n".join(lines)

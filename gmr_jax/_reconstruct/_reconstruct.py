@@ -1,0 +1,374 @@
+"""The end-to-end reconstruction of Algorithm 1 on recordings, and the GMC-SINDy baseline."""
+
+from dataclasses import dataclass, field
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import GMRInputError
+from .._solution import RESULTS, GMRComputationError, Solution, as_result
+from .._coordination._coordinate import coordinate, split_flat
+from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, Library
+from .._fit._local_fit import AutoThreshold, LocalFit, fit_local
+from .._fit._stls import STLS, compress, stls_qr
+from .._fit._threshold import default_thresholds, select_threshold
+from .._model._model import GlobalModel
+from .._recordings._recording import Recording, validate
+from .._topology import as_topology
+
+#: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
+DEFAULT_SOLVER = STLS(threshold=0.1, alpha=0.0, normalize_columns=True, unbias=True)
+
+
+def regression_targets(rec: Recording, masses: np.ndarray, topology) -> np.ndarray:
+    """Force carried by each DOF (N, D): input force minus inertia, the left side of Eq. (8).
+
+    Independent: force_i - m_i a_i. Chain: sum_{k>=i} (force_k - m_k a_k), i.e. H a with H of
+    Eq. (9) written for base-first numbering (`AbstractTopology.carried`)."""
+    _, f = rec.inputs()
+    return as_topology(topology).carried(f - rec.a * masses[None, :])
+
+
+def _resolve(recordings, masses, topology, min_recordings=2, what="fit"):
+    if len(recordings) == 0:
+        raise GMRInputError("no recordings given: pass one recording per equilibrium")
+    recs = [validate(r, r.name) for r in recordings]
+    d = recs[0].n_dof
+    for r in recs:
+        if r.n_dof != d:
+            raise GMRInputError(f"{r.name}: has {r.n_dof} DOFs but {recs[0].name} has {d}")
+    topology = as_topology(("chain" if d > 1 else "independent") if topology is None else topology)
+    if masses is None:
+        found = [r.masses for r in recs if r.masses is not None]
+        masses = found[0] if found else np.ones(d)
+    masses = np.asarray(masses, float).reshape(-1)
+    if masses.shape[0] != d or np.any(masses <= 0) or not np.all(np.isfinite(masses)):
+        raise GMRInputError(f"masses must be {d} positive numbers, got {masses.tolist()}")
+    recs = [r.complete(topology) for r in recs]
+    if len(recs) < min_recordings:
+        raise GMRInputError(
+            f"only {len(recs)} recording(s): the coordination needs small-vibration recordings "
+            f"around at least two distinct equilibria (one file per equilibrium)"
+        )
+    return recs, masses, topology
+
+
+def group_wells(means: np.ndarray, tol: float) -> np.ndarray:
+    """Label recordings whose mean deformation differs by less than `tol` as the same well;
+    labels ordered by increasing deformation."""
+    order = np.argsort(means)
+    labels = np.empty(len(means), int)
+    current, last = -1, None
+    for i in order:
+        if last is None or means[i] - last > tol:
+            current += 1
+        labels[i] = current
+        last = means[i]
+    return labels
+
+
+def _pad_stack(chunks: list[list[np.ndarray]]):
+    """Concatenate each group's arrays and pad groups to one length (weight 0 on padding)."""
+    cat = [np.concatenate(c) for c in chunks]
+    n = max(c.shape[0] for c in cat)
+    out = np.zeros((len(cat), n))
+    w = np.zeros((len(cat), n))
+    for i, c in enumerate(cat):
+        out[i, : c.shape[0]] = c
+        w[i, : c.shape[0]] = 1.0
+    return out, w
+
+
+@dataclass
+class DofReport:
+    """What the reconstruction did for one DOF (cell)."""
+
+    equilibria: np.ndarray
+    local_coef: np.ndarray
+    local_stderr: np.ndarray
+    thresholds: np.ndarray
+    recordings_per_well: list
+    stats: dict = field(default_factory=dict)
+
+
+class _Failure:
+    """The first numerical failure met on the way (a RESULTS code and where), raised at once
+    as `GMRComputationError` when `throw`, else kept for the Solution's `result`."""
+
+    def __init__(self, what: str, throw: bool):
+        self.what, self.throw = what, throw
+        self.code, self.detail = RESULTS.successful, ""
+
+    def note(self, code, detail: str):
+        code = as_result(getattr(code, "_value", code))
+        if self.throw:
+            raise GMRComputationError(self.what, code, detail)
+        if self.code == RESULTS.successful:
+            self.code, self.detail = code, detail
+
+
+def _solution(model, failure: _Failure, method, library, reports, training, warnings) -> Solution:
+    stats = {"method": method, "library": library, "dofs": reports, "training": training,
+             "warnings": warnings, "failure": failure.detail}
+    return Solution(value=model, result=failure.code, stats=stats)
+
+
+def _model_from_blocks(masses, topology, stiff, vdamp, pdamp, stderr=None) -> GlobalModel:
+    return GlobalModel(
+        masses=jnp.asarray(masses),
+        stiffness=jnp.asarray(np.stack(stiff)),
+        velocity_damping=jnp.asarray(np.stack(vdamp)),
+        position_damping=jnp.asarray(np.stack(pdamp)),
+        topology=topology,
+        stderr=stderr,
+    )
+
+
+def training_scores(model: GlobalModel, recs, masses, topology) -> dict:
+    """R² and NRMSE of the model force against the measured force, per recording and DOF."""
+    out = {}
+    for r in recs:
+        y = regression_targets(r, masses, topology)
+        yhat = np.asarray(jax.vmap(model.force)(jnp.asarray(r.x), jnp.asarray(r.v)))
+        resid = np.sum((y - yhat) ** 2, axis=0)
+        total = np.sum((y - y.mean(axis=0)) ** 2, axis=0)
+        out[r.name] = {"r2": (1 - resid / total).tolist(), "nrmse": np.sqrt(resid / total).tolist()}
+    return out
+
+
+def _screen(fits: LocalFit, n_sigma: float) -> LocalFit:
+    se = jnp.sqrt(jnp.clip(jnp.diagonal(fits.covariance, axis1=1, axis2=2), 0.0))
+    keep = jnp.abs(fits.coef) >= n_sigma * se
+    cov = jnp.where(keep[:, :, None] & keep[:, None, :], fits.covariance, 0.0)
+    return eqx.tree_at(lambda f: (f.coef, f.covariance), fits, (jnp.where(keep, fits.coef, 0.0), cov))
+
+
+def low_order_terms(library: Library, restoring_order: int = 1) -> np.ndarray:
+    """Mask of the local terms exempt from the STLS threshold: the restoring Taylor terms
+    x^0 .. x^`restoring_order` and the damping polynomial's v and x v (value and slope)."""
+    keep = {(STIFFNESS, k) for k in range(restoring_order + 1)}
+    keep |= {(VELOCITY_DAMPING, 1), (POSITION_DAMPING, 1)}
+    return np.array([t in keep for t in library.terms()])
+
+
+def _fit_wells(xs, vs, ys, w, library, solver, select, keep=None):
+    # One jitted fit per well (same shapes: compiled once), stacked. A vmap over wells with
+    # batched weights and the CV threshold sweep stalled in XLA:CPU (jax 0.10), so loop here.
+    sols = [fit_local(xs[k], vs[k], ys[k], library, solver, select, weights=w[k], keep=keep, throw=False)
+            for k in range(xs.shape[0])]
+    return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *sols)
+
+
+def velocity_terms_not_shared(coef: np.ndarray, library: Library) -> np.ndarray:
+    """Mask of the position-independent damping terms sgn(v)|v|^j, j != 1, that some wells'
+    local fits selected and others did not (`coef`: (wells, terms))."""
+    nonzero = coef != 0
+    vd = np.array([phys == VELOCITY_DAMPING and k != 1 for phys, k in library.terms()])
+    return vd & np.any(nonzero, axis=0) & ~np.all(nonzero, axis=0)
+
+
+def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_sigma, dof, failure):
+    """Drop the position-independent damping terms not selected at every well and refit the
+    wells that had them (on their support less those terms, at their own threshold), until
+    every remaining term is shared. Returns the fits and the dropped orders j."""
+    dropped = []
+    while np.any(drop := velocity_terms_not_shared(coef := np.asarray(fits.coef), library)):
+        for k in np.nonzero(np.any((coef != 0) & drop[None, :], axis=1))[0]:
+            slv = eqx.tree_at(lambda s: s.threshold, solver, fits.threshold[k])
+            sol = fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=keep,
+                            support=jnp.asarray((coef[k] != 0) & ~drop), throw=False)
+            if sol.result != RESULTS.successful:
+                failure.note(sol.result, f"DOF {dof}, well {k}: refit without unshared damping terms")
+            new = jax.tree.map(lambda a: a[None], sol.value)
+            if screen_sigma is not None:
+                new = _screen(new, screen_sigma)
+            fits = jax.tree.map(lambda a, b, k=k: a.at[k].set(b[0]), fits, new)
+        dropped += [k for (_, k), d in zip(library.terms(), drop) if d]
+    return fits, sorted(dropped)
+
+
+def reconstruct(
+    recordings: list[Recording],
+    library: Library = Library(5, 5),
+    solver: STLS = DEFAULT_SOLVER,
+    select: AutoThreshold | None = AutoThreshold(),
+    *,
+    topology: str | None = None,
+    masses=None,
+    well_tol: float = 0.1,
+    screen_sigma: float | None = 3.0,
+    coordination: str = "gls",
+    keep_low_orders: bool = True,
+    keep_restoring_order: int | None = None,
+    shared_damping: bool = True,
+    throw: bool = True,
+) -> Solution:
+    """Global model reconstruction, Algorithm 1, from small-vibration recordings.
+
+    **Arguments:**
+
+    - `recordings`: one per equilibrium (single DOF) or per configuration (chain). Missing
+      v/a are estimated from x (Savitzky-Golay).
+    - `library`: local library orders r, d (Eqs. 5-7).
+    - `solver`, `select`: STLS settings; `select=None` uses `solver.threshold` as given.
+    - `topology`: "chain" (default for several DOFs) or "independent".
+    - `masses`: per DOF; default from the recordings, else 1 (per unit mass).
+    - `screen_sigma`: before the coordination, a local coefficient smaller than `screen_sigma`
+      standard errors is set to zero (a t-test on each kept term): the Hermite solve takes every
+      local coefficient as exact, so an insignificant high-order term kept by the threshold
+      rule would otherwise raise the global degree and distort the model. None disables it.
+    - `well_tol`: recordings whose mean deformation of a cell differs by less than this
+      fraction of that cell's spread are taken as the same well of that cell and pooled.
+    - `keep_low_orders`: the local Taylor terms the coordination needs, the restoring law's
+      x^0 .. x^`keep_restoring_order` and the damping polynomial's v, x v, are exempt from the
+      STLS threshold (refitted on the STLS support plus these; the `screen_sigma` t-test
+      still decides whether each is kept). The CV threshold judges a term by its share of the
+      *local* force; a damping slope x v or a restoring x^3 is a tiny share of it at small
+      amplitude, yet fixes the global law between the wells. Kresling truss: the Hermite
+      interpolant from F, F', F'' at both wells is 1.3 % off (critical force 0.7 %), from
+      F to its third derivative 0.09 %; a dropped x^3 also biases the slope (RESULTS.md).
+    - `keep_restoring_order`: see `keep_low_orders`. Default (None): 3 when every recording
+      carries measured velocities and accelerations, 1 when they had to be estimated from x:
+      the differentiation filter's gain error then correlates with the amplitude and a kept
+      x^3 absorbs it (bistable joint at 1 degree from x alone: x^3 17 times too large).
+    - `coordination`: "gls" (covariance-weighted, lowest adequate degree) or "hermite" (the
+      paper's exact interpolant); see `coordinate`.
+    - `shared_damping`: the position-independent damping sgn(v)|v|^j (j != 1; j = 1 belongs
+      to the damping polynomial C(x) v) is one law shared by every well (Eq. 21). A term that
+      some wells' fits select and others do not is taken as a local artefact and dropped, and
+      the wells that had it are refitted without it (reported in `dofs[i].stats`). Typical
+      cause: an unselected x^2 v standing in as a cancelling v|v|, v^3, v^3|v| combination,
+      harmless inside the well, far off at deployment speeds (Kresling chain, 0.75 mm, seed 4:
+      base-cell damping error 8.3 % -> 0.19 %, basin agreement 60.7 % -> 94.6 %; RESULTS.md).
+
+    - `throw`: raise `GMRComputationError` on a numerical failure (a local fit or the
+      coordination); with False, read `result` (the model then holds NaN where it failed).
+
+    **Returns:** a `Solution` whose `value` is the `GlobalModel` (standard errors attached),
+    `result` a `RESULTS` code, and `stats`: `method` ("GMR"), `library`, `dofs` (per-DOF
+    `DofReport`: equilibria, local coefficients and standard errors, thresholds, global orders,
+    condition numbers), `training` (R² and NRMSE per recording and DOF), `warnings`.
+
+    User mistakes (no recordings, one equilibrium only, inconsistent shapes or masses) raise
+    `GMRInputError` before anything is computed.
+    """
+    failure = _Failure("reconstruct", throw)
+    measured = all(r.v is not None and r.a is not None and not r.derived for r in recordings)
+    if keep_restoring_order is None:
+        keep_restoring_order = 3 if measured else 1
+    recs, masses, topology = _resolve(recordings, masses, topology)
+    d = recs[0].n_dof
+    targets = [regression_targets(r, masses, topology) for r in recs]
+    stiff, vdamp, pdamp, se_s, se_v, se_p, reports = [], [], [], [], [], [], []
+    for i in range(d):
+        means = np.array([r.x[:, i].mean() for r in recs])
+        spread = np.ptp(means)
+        labels = group_wells(means, well_tol * spread if spread > 0 else 0.0)
+        n_wells = labels.max() + 1
+        if n_wells < 2:
+            raise GMRInputError(
+                f"DOF {i}: all recordings are around the same equilibrium (mean x = {means.mean():.4g}); "
+                f"the coordination needs recordings around at least two distinct equilibria"
+            )
+        groups = [[k for k in range(len(recs)) if labels[k] == w] for w in range(n_wells)]
+        xs, w = _pad_stack([[recs[k].x[:, i] for k in g] for g in groups])
+        vs, _ = _pad_stack([[recs[k].v[:, i] for k in g] for g in groups])
+        ys, _ = _pad_stack([[targets[k][:, i] for k in g] for g in groups])
+        xs, vs, ys, w = (jnp.asarray(a) for a in (xs, vs, ys, w))
+        keep = jnp.asarray(low_order_terms(library, keep_restoring_order)) if keep_low_orders else None
+        sols = _fit_wells(xs, vs, ys, w, library, solver, select, keep)
+        fits: LocalFit = sols.value
+        if screen_sigma is not None:
+            fits = _screen(fits, screen_sigma)
+        codes = np.asarray(sols.result._value)
+        for k in np.nonzero(codes != RESULTS.successful._value)[0]:
+            failure.note(codes[k], f"DOF {i}, well {k}: local fit")
+        dropped = []
+        if shared_damping:
+            fits, dropped = _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_sigma, i,
+                                                    failure)
+        coord = coordinate(fits, library, method=coordination, throw=False)
+        if coord.result != RESULTS.successful:
+            failure.note(coord.result, f"DOF {i}: coordination of the equilibria "
+                         f"{np.asarray(fits.equilibrium).round(6).tolist()}, condition numbers "
+                         f"{float(coord.stats['cond_r']):.3g}/{float(coord.stats['cond_d']):.3g}")
+        g = coord.value
+        se = split_flat(jnp.sqrt(jnp.clip(jnp.diag(coord.aux), 0.0)), g)
+        stiff.append(np.asarray(g.stiffness)), vdamp.append(np.asarray(g.velocity_damping))
+        pdamp.append(np.asarray(g.position_damping))
+        se_s.append(np.asarray(se.stiffness)), se_v.append(np.asarray(se.velocity_damping))
+        se_p.append(np.asarray(se.position_damping))
+        reports.append(DofReport(
+            equilibria=np.asarray(fits.equilibrium),
+            local_coef=np.asarray(fits.coef),
+            local_stderr=np.sqrt(np.clip(np.diagonal(np.asarray(fits.covariance), axis1=1, axis2=2), 0, None)),
+            thresholds=np.asarray(fits.threshold),
+            recordings_per_well=[[recs[k].name for k in g] for g in groups],
+            stats={k: np.asarray(v).tolist() for k, v in coord.stats.items()}
+            | {"dropped_velocity_damping": dropped},
+        ))
+    stderr = {STIFFNESS: jnp.asarray(np.stack(se_s)), VELOCITY_DAMPING: jnp.asarray(np.stack(se_v)),
+              POSITION_DAMPING: jnp.asarray(np.stack(se_p))}
+    model = _model_from_blocks(masses, topology, stiff, vdamp, pdamp, stderr)
+    return _solution(model, failure, "GMR", library, reports, training_scores(model, recs, masses, topology), [])
+
+
+def coefficients_to_blocks(coef: np.ndarray, library: Library):
+    """Place a library coefficient vector into (stiffness, velocity_damping, position_damping)."""
+    coef = np.asarray(coef)
+    s = np.zeros(library.restoring_order + 1)
+    v = np.zeros(library.damping_order + 1)
+    p = np.zeros(library.damping_order + 1)
+    for c, (phys, k) in zip(coef, library.terms()):
+        {STIFFNESS: s, VELOCITY_DAMPING: v, POSITION_DAMPING: p}[phys][k] = c
+    return s, v, p
+
+
+def gmc_sindy(
+    recordings: list[Recording],
+    library: Library = Library(7, 7),
+    solver: STLS = DEFAULT_SOLVER,
+    select: AutoThreshold | None = AutoThreshold(),
+    *,
+    topology: str | None = None,
+    masses=None,
+    throw: bool = True,
+) -> Solution:
+    """The paper's baseline (GMC-SINDy with data assembly, Sec. 2.1): all recordings stacked
+    in global coordinates, one global library Θ(x, v), one STLS fit per DOF. Same threshold
+    rule as `reconstruct`, so the comparison isolates the method.
+
+    **Returns:** a `Solution` as `reconstruct`'s (`stats["method"]` "GMC-SINDy"). An STLS whose
+    support was still changing at `max_iter` is kept (as pysindy does) with a warning in
+    `stats["warnings"]`; a non-finite fit is a failure (`throw`)."""
+    failure, warnings = _Failure("gmc_sindy", throw), []
+    recs, masses, topology = _resolve(recordings, masses, topology, min_recordings=1)
+    d = recs[0].n_dof
+    targets = [regression_targets(r, masses, topology) for r in recs]
+    stiff, vdamp, pdamp, reports = [], [], [], []
+    for i in range(d):
+        x = jnp.asarray(np.concatenate([r.x[:, i] for r in recs]))
+        v = jnp.asarray(np.concatenate([r.v[:, i] for r in recs]))
+        y = jnp.asarray(np.concatenate([t[:, i] for t in targets]))
+        theta = library(x, v)
+        slv = solver
+        if select is not None:
+            grid = default_thresholds(theta, y, select.n_grid, select.lo)
+            sel = select_threshold(theta, y, grid, solver, n_folds=select.n_folds)
+            slv = eqx.tree_at(lambda s: s.threshold, solver, sel.value)
+        sol = stls_qr(compress(theta, y), slv)
+        if sol.result == RESULTS.stls_max_iterations:
+            warnings.append(f"DOF {i}: {RESULTS[sol.result]}")
+        elif sol.result != RESULTS.successful:
+            failure.note(sol.result, f"DOF {i}: global STLS fit")
+        s, v_, p = coefficients_to_blocks(np.asarray(sol.value), library)
+        stiff.append(s), vdamp.append(v_), pdamp.append(p)
+        reports.append(DofReport(equilibria=np.array([]), local_coef=np.asarray(sol.value)[None],
+                                 local_stderr=np.full((1, library.n_terms), np.nan),
+                                 thresholds=np.asarray(slv.threshold)[None], recordings_per_well=[],
+                                 stats={"result": RESULTS[sol.result]}))
+    model = _model_from_blocks(masses, topology, stiff, vdamp, pdamp)
+    training = training_scores(model, recs, masses, topology)
+    return _solution(model, failure, "GMC-SINDy", library, reports, training, warnings)

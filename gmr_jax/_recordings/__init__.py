@@ -1,0 +1,1 @@
+"""Private implementation package: import the public names from `gmr_jax`."""

@@ -1,0 +1,320 @@
+"""Refinement of a global model's coefficients on measured trajectories (output-error least
+squares with multiple shooting), by optimistix Levenberg-Marquardt through diffrax solves."""
+
+import dataclasses
+
+import diffrax as dfx
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float
+
+from .._errors import GMRInputError
+from .._solution import RESULTS, Solution, code_name, raise_if_failed
+from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING
+from .._model._model import GlobalModel
+from .._simulate._integrate import Integrator
+from ._shooting import OutputError, Windows, make_windows, output_error, prepare, simulate_windows
+
+PHYSICS = (STIFFNESS, VELOCITY_DAMPING, POSITION_DAMPING)
+#: Residual (in units of the DOF's standard deviation) given to every sample of a window whose
+#: simulation failed or left the divergence box: large, constant, with zero derivative, so that
+#: a step into divergence is rejected by the trust region instead of producing NaN gradients.
+FAILED_WINDOW_RESIDUAL = 10.0
+
+
+class RefineSettings(eqx.Module):
+    """Settings of `refine`.
+
+    **Attributes:**
+
+    - `window`: shooting window length in seconds; every window starts from the measured (x, v)
+      at its first sample (v estimated from x when not recorded).
+    - `solver`: an optimistix least-squares solver (Levenberg-Marquardt by default; e.g.
+      `optx.GaussNewton(rtol, atol)` also works).
+    - `max_iterations`: maximum least-squares solver iterations (optimistix's `max_steps`).
+    - `stride`: residuals at every `stride`-th sample of a window (cheaper Jacobians).
+    - `max_windows`: at most this many windows per recording (evenly spread), or None for all.
+    - `sign_eps`: the sgn(v) in `velocity_damping` order 0 (Coulomb friction) is replaced during
+      the optimisation by tanh(v / eps) with eps = `sign_eps` times the RMS measured velocity
+      (the gradient of sgn is zero and its jump stalls adaptive solvers); reported errors use
+      the exact model. Only applied when that term is nonzero or free.
+    - `jac`: "fwd" (default): each window's Jacobian by forward-mode through the solve
+      (`diffrax.ForwardMode`, cost ~ number of free coefficients); "bwd": by reverse mode with
+      diffrax's default `RecursiveCheckpointAdjoint` (cost ~ residuals per window).
+    - `integrator`: ODE tolerances and the per-window `max_steps`.
+    - `box_ranges`: divergence box of a window: the recording's range of x widened by
+      `box_ranges` times that range on each side; a window that leaves it counts as diverged.
+    """
+
+    window: float = 1.0
+    solver: optx.AbstractLeastSquaresSolver = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-8)
+    max_iterations: int = eqx.field(static=True, default=50)
+    stride: int = eqx.field(static=True, default=1)
+    max_windows: int | None = eqx.field(static=True, default=None)
+    sign_eps: float = eqx.field(static=True, default=1e-3)
+    jac: str = eqx.field(static=True, default="fwd")
+    integrator: Integrator = Integrator(rtol=1e-8, atol=1e-10, max_steps=20_000)
+    box_ranges: float = 10.0
+
+    def __check_init__(self):
+        if self.jac not in ("fwd", "bwd"):
+            raise GMRInputError(f"jac must be 'fwd' or 'bwd', got {self.jac!r}")
+        if self.window is not None and not (np.isfinite(self.window) and self.window > 0):
+            raise GMRInputError(f"window must be a positive number of seconds, got {self.window}")
+        if self.stride < 1 or self.max_iterations < 1:
+            raise GMRInputError("stride and max_iterations must be >= 1")
+
+
+def free_mask(model: GlobalModel, free=None) -> dict[str, np.ndarray]:
+    """Which coefficients `refine` adjusts, as boolean arrays shaped like the model's.
+
+    `free`: None or "all": every nonzero coefficient (the support is kept); a physics name
+    ("stiffness", "velocity_damping", "position_damping"), "damping" (both damping kinds) or a
+    comma-separated list of them: the nonzero coefficients of those; a list of
+    (dof, physics, order) tuples (zero coefficients allowed: they start at 0); or a dict
+    {physics: bool array} mask."""
+    arrays = {p: np.asarray(getattr(model, p)) for p in PHYSICS}
+    if free is None:
+        free = "all"
+    if isinstance(free, str):
+        names = [s.strip() for s in free.split(",") if s.strip()]
+        chosen = set()
+        for s in names:
+            if s == "all":
+                chosen.update(PHYSICS)
+            elif s == "damping":
+                chosen.update((VELOCITY_DAMPING, POSITION_DAMPING))
+            elif s in PHYSICS:
+                chosen.add(s)
+            else:
+                raise GMRInputError(
+                    f"free: unknown {s!r}; use 'all', 'damping', or physics names {', '.join(PHYSICS)}"
+                )
+        mask = {p: (arrays[p] != 0) & (p in chosen) for p in PHYSICS}
+    elif isinstance(free, dict):
+        mask = {}
+        for p in PHYSICS:
+            m = np.asarray(free.get(p, np.zeros_like(arrays[p], bool)), bool)
+            if m.shape != arrays[p].shape:
+                raise GMRInputError(f"free[{p!r}] has shape {m.shape}, the model's {p} has {arrays[p].shape}")
+            mask[p] = m
+    else:
+        mask = {p: np.zeros(arrays[p].shape, bool) for p in PHYSICS}
+        for item in free:
+            try:
+                dof, phys, order = item
+                dof, order = int(dof), int(order)
+            except (TypeError, ValueError):
+                raise GMRInputError(f"free: expected (dof, physics, order) tuples, got {item!r}") from None
+            if phys not in PHYSICS:
+                raise GMRInputError(f"free: unknown physics {phys!r}; known: {', '.join(PHYSICS)}")
+            if not (0 <= dof < arrays[phys].shape[0] and 0 <= order < arrays[phys].shape[1]):
+                raise GMRInputError(
+                    f"free: term ({dof}, {phys}, {order}) is outside the model's {phys} array "
+                    f"{arrays[phys].shape} (dof, order)"
+                )
+            mask[phys][dof, order] = True
+    if not any(m.any() for m in mask.values()):
+        raise GMRInputError(f"free={free!r} selects no coefficient of the model (all zero or none named)")
+    return mask
+
+
+class ShootingProblem(eqx.Module):
+    """The least-squares problem of `refine`: parameters p (free coefficients divided by their
+    starting magnitude), residuals = (simulated - measured x) / std over all windows.
+
+    `residuals(p, windows)` uses the default `RecursiveCheckpointAdjoint` (use it with
+    `jax.grad`); `__call__(p, windows)` is the same function with a custom JVP that forms each
+    window's dense Jacobian once (forward or reverse mode per `jac`), which optimistix
+    linearises."""
+
+    model: GlobalModel
+    scales: Float[Array, " free"]
+    index: tuple = eqx.field(static=True)  # per physics: (rows, cols) tuples
+    stride: int = eqx.field(static=True)
+    jac: str = eqx.field(static=True)
+    integrator: Integrator
+
+    def to_model(self, p: Float[Array, " free"]) -> GlobalModel:
+        coef = p * self.scales
+        model, start = self.model, 0
+        for phys, (rows, cols) in zip(PHYSICS, self.index):
+            n = len(rows)
+            if n:
+                arr = getattr(model, phys).at[np.asarray(rows), np.asarray(cols)].set(coef[start:start + n])
+                model = dataclasses.replace(model, **{phys: arr})
+            start += n
+        return model
+
+    def _window_residuals(self, p, w: Windows, adjoint):
+        xs, codes = simulate_windows(self.to_model(p), w, self.stride, self.integrator, adjoint)
+        ok = codes == RESULTS.successful._value
+        e = (xs - w.x[:, self.stride::self.stride]) / w.scale[:, None, :]
+        e = jnp.where(ok[:, None, None], e, FAILED_WINDOW_RESIDUAL)
+        return e.reshape(e.shape[0], -1), ok
+
+    def residuals(self, p, windows: list[Windows], adjoint=dfx.RecursiveCheckpointAdjoint()):
+        """All residuals (flat) and the per-window success flags."""
+        parts = [self._window_residuals(p, w, adjoint) for w in windows]
+        return jnp.concatenate([r.reshape(-1) for r, _ in parts]), jnp.concatenate([ok for _, ok in parts])
+
+    def residuals_and_jacobian(self, p, windows: list[Windows]):
+        """Residuals (R,) and their Jacobian (R, free), window by window."""
+        rs, js = [], []
+        for w in windows:
+            if self.jac == "fwd":
+                adj = dfx.ForwardMode()
+                jfn = jax.jacfwd
+            else:
+                adj = dfx.RecursiveCheckpointAdjoint()
+                jfn = jax.jacrev
+
+            def one(q, wi, adj=adj):
+                r, _ = self._window_residuals(q, jax.tree_util.tree_map(lambda a: a[None], wi), adj)
+                return r[0], r[0]
+
+            j, r = jax.vmap(lambda wi: jfn(one, has_aux=True)(p, wi))(w)
+            rs.append(r.reshape(-1))
+            js.append(j.reshape(-1, p.shape[0]))
+        return jnp.concatenate(rs), jnp.concatenate(js)
+
+    def __call__(self, p, windows):
+        return _residual_fn(self, p, windows), None
+
+
+@jax.custom_jvp
+def _residual_fn(problem, p, windows):
+    # not differentiated here (the JVP rule below is): a plain while loop compiles fastest
+    return problem.residuals(p, windows, dfx.ForwardMode())[0]
+
+
+@_residual_fn.defjvp
+def _residual_fn_jvp(primals, tangents):
+    problem, p, windows = primals
+    _, dp, _ = tangents
+    r, j = problem.residuals_and_jacobian(p, windows)
+    return r, j @ dp
+
+
+def shooting_problem(
+    model: GlobalModel, recordings, free=None, settings: RefineSettings = RefineSettings()
+) -> tuple[ShootingProblem, Float[Array, " free"], list[Windows]]:
+    """Build the problem `refine` solves: (problem, p0 (all ones), windows). The model is the
+    one optimised (with the sgn(v) surrogate where applicable)."""
+    if not isinstance(model, GlobalModel):
+        raise GMRInputError(f"refine needs a GlobalModel (polynomial coefficients), got {type(model).__name__}")
+    recs = prepare(recordings, model.n_dof, model.topology)
+    mask = free_mask(model, free)
+    windows = make_windows(recs, settings.window, settings.box_ranges, settings.max_windows)
+    index, scales = [], []
+    for phys in PHYSICS:
+        rows, cols = np.nonzero(mask[phys])
+        index.append((tuple(rows.tolist()), tuple(cols.tolist())))
+        c = np.abs(np.asarray(getattr(model, phys))[rows, cols])
+        scales.append(np.where(c > 0, c, 1.0))
+    scales = np.concatenate(scales)
+    m = dataclasses.replace(model, stderr=None)
+    if _uses_sign(model, mask):
+        v_rms = float(np.sqrt(np.mean(np.concatenate([np.asarray(r.v).ravel() ** 2 for r in recs]))))
+        m = m.with_sign_eps(settings.sign_eps * max(v_rms, 1e-300))
+    problem = ShootingProblem(m, jnp.asarray(scales), tuple(index), settings.stride, settings.jac, settings.integrator)
+    # p = coefficient / scale: the sign of each nonzero start, 0 for a zero start
+    signs = np.concatenate([np.sign(np.asarray(getattr(model, ph))[np.asarray(r, int), np.asarray(c, int)])
+                            if len(r) else np.zeros(0) for ph, (r, c) in zip(PHYSICS, index)])
+    p0 = jnp.asarray(signs, dtype=jnp.float64)
+    return problem, p0, windows
+
+
+def _uses_sign(model: GlobalModel, mask) -> bool:
+    col = np.asarray(model.velocity_damping)[:, 0]
+    return bool(np.any(col != 0) or np.any(mask[VELOCITY_DAMPING][:, 0]))
+
+
+@eqx.filter_jit
+def _residuals(problem, p, windows):
+    return problem.residuals(p, windows, dfx.ForwardMode())
+
+
+@eqx.filter_jit
+def _solve(problem, p0, windows, solver, max_iterations):
+    sol = optx.least_squares(problem, solver, p0, windows, has_aux=True, max_steps=max_iterations, throw=False)
+    r, ok = problem.residuals(sol.value, windows, dfx.ForwardMode())
+    return sol.value, RESULTS.promote(sol.result), sol.stats["num_steps"], jnp.sum(r**2), ok
+
+
+def refine(
+    model: GlobalModel,
+    recordings,
+    *,
+    free=None,
+    settings: RefineSettings = RefineSettings(),
+    holdout=None,
+    throw: bool = True,
+) -> Solution:
+    """Fit the coefficients of `model` to measured trajectories (output error, multiple shooting).
+
+    Every recording is cut into windows of `settings.window` seconds; each window is simulated
+    (diffrax, Tsit5) from the measured (x, v) at its first sample under the measured inputs, and
+    the residuals (simulated - measured x, per DOF over the recording's std) of all windows are
+    minimised by `settings.solver` (Levenberg-Marquardt) over the free coefficients, each
+    scaled by its starting magnitude. Windows that fail or diverge get a constant penalty
+    residual (no NaN gradients); sgn(v) terms are smoothed during the fit (see
+    `RefineSettings.sign_eps`).
+
+    **Arguments:**
+
+    - `model`: the starting `GlobalModel` (e.g. from `reconstruct`); its support is kept.
+    - `recordings`: training `Recording`s (same DOFs as the model; inputs base_acc or force).
+    - `free`: which coefficients to fit (see `free_mask`); the others stay fixed.
+    - `settings`: `RefineSettings`.
+    - `holdout`: recordings not used in the fit, on which the output error is reported.
+    - `throw`: raise `GMRComputationError` if the refinement failed (otherwise read `result`).
+
+    **Returns:** a `Solution` with `value` the refined `GlobalModel` (exact sgn(v), no stderr),
+    `result` (`successful`; `nonlinear_max_steps_reached` if the solver ran out of iterations;
+    `diverged` if training windows of the refined model fail; `nonfinite`), and `stats`:
+    `iterations`, `optimistix_result` (its message), `train` and `holdout` dicts of
+    `before`/`after` `OutputError`s (exact model, windows of `settings.window`), `free`
+    (the terms fitted), `cost_before`/`cost_after` (the surrogate least-squares objective).
+    """
+    problem, p0, windows = shooting_problem(model, recordings, free, settings)
+    r0, ok0 = _residuals(problem, p0, windows)
+    cost0 = float(jnp.sum(r0**2))
+    p, result, steps, cost1, ok = _solve(problem, p0, windows, settings.solver, settings.max_iterations)
+    refined = dataclasses.replace(problem.to_model(p), sign_eps=0.0, stderr=None)
+    exact0 = dataclasses.replace(model, sign_eps=0.0)
+    oname = code_name(result)
+    if not bool(np.all(np.isfinite(np.asarray(p)))):
+        result = RESULTS.nonfinite
+    elif result == RESULTS.successful and not bool(np.all(np.asarray(ok))):
+        result = RESULTS.diverged
+
+    def errs(recs):
+        kw = dict(integrator=settings.integrator, box_ranges=settings.box_ranges, max_windows=settings.max_windows)
+        return {"before": output_error(exact0, recs, settings.window, **kw).value,
+                "after": output_error(refined, recs, settings.window, **kw).value}
+
+    stats = {
+        "iterations": int(steps),
+        "optimistix_result": oname,
+        "cost_before": cost0,
+        "cost_after": float(cost1),
+        "failed_windows_before": int(np.sum(~np.asarray(ok0))),
+        "failed_windows_after": int(np.sum(~np.asarray(ok))),
+        "windows": int(np.asarray(ok).size),
+        "free": _free_terms(problem),
+        "train": errs(recordings),
+        "holdout": errs(holdout) if holdout is not None else None,
+    }
+    return raise_if_failed(Solution(value=refined, result=result, stats=stats), throw, "refine")
+
+
+def _free_terms(problem: ShootingProblem) -> list[tuple[int, str, int]]:
+    return [(int(r), phys, int(c)) for phys, (rows, cols) in zip(PHYSICS, problem.index) for r, c in zip(rows, cols)]
+
+
+__all__ = ["RefineSettings", "refine", "free_mask", "shooting_problem", "ShootingProblem", "OutputError",
+           "output_error"]

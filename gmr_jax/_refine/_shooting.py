@@ -1,0 +1,204 @@
+"""Multiple shooting: recordings cut into fixed-length windows, each simulated from its measured
+start state, so that a poor model cannot drift (or diverge) over a whole long record."""
+
+from dataclasses import dataclass
+
+import diffrax as dfx
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float, Int
+
+from .._errors import GMRInputError
+from .._model._model import AbstractMechanicalModel
+from .._recordings._recording import Recording, validate
+from .._simulate._inputs import Sampled
+from .._simulate._integrate import Integrator, integrate, vector_field
+from .._solution import RESULTS, Solution, as_result, code_name, raise_if_failed
+
+
+class Windows(eqx.Module):
+    """Windows of one length (one shape), stacked for vmap.
+
+    **Attributes:** `t` (W, L) sample times; `x` (W, L, D) measured displacements; `v0` (W, D)
+    measured velocity at each window's first sample; `base_acc` (W, L); `force` (W, L, D);
+    `scale` (W, D) per-DOF standard deviation of x over the window's recording (residual
+    scale); `lo`, `hi` (W, D) the divergence box (data range widened by `box_ranges` ranges);
+    `record` (W,) index of the recording each window comes from.
+    """
+
+    t: Float[Array, "win samples"]
+    x: Float[Array, "win samples dof"]
+    v0: Float[Array, "win dof"]
+    base_acc: Float[Array, "win samples"]
+    force: Float[Array, "win samples dof"]
+    scale: Float[Array, "win dof"]
+    lo: Float[Array, "win dof"]
+    hi: Float[Array, "win dof"]
+    record: np.ndarray = eqx.field(static=True, converter=lambda a: tuple(np.asarray(a).tolist()))
+
+    @property
+    def n_windows(self) -> int:
+        return int(self.t.shape[0])
+
+
+def prepare(recordings, n_dof: int, topology: str, src: str = "recording") -> list[Recording]:
+    """Validate recordings against a model of `n_dof` DOFs and fill a missing `v` from `x`."""
+    if isinstance(recordings, Recording):
+        recordings = [recordings]
+    recordings = list(recordings)
+    if not recordings:
+        raise GMRInputError(f"no {src}s given: refinement needs at least one recording")
+    out = []
+    for k, rec in enumerate(recordings):
+        name = f"{src} {k} ({rec.name})"
+        rec = validate(rec, name)
+        if rec.n_dof != n_dof:
+            raise GMRInputError(
+                f"{name}: 'x' has {rec.n_dof} DOF column(s) but the model has {n_dof} DOFs; "
+                f"give recordings of the same structure as the model"
+            )
+        std = np.std(rec.x, axis=0)
+        if np.any(std <= 0):
+            raise GMRInputError(f"{name}: DOF {int(np.argmin(std))} is constant; nothing to fit to")
+        if rec.v is None:
+            rec = rec.complete(topology)
+        out.append(rec)
+    return out
+
+
+def make_windows(
+    recordings: list[Recording], window: float | None, box_ranges: float, max_windows: int | None = None
+) -> list[Windows]:
+    """Cut validated recordings into non-overlapping windows of `window` seconds (None: the
+    whole record, one window each); windows of equal sample count are stacked together.
+    `max_windows` keeps at most that many per recording, evenly spread."""
+    groups: dict[int, list] = {}
+    for k, rec in enumerate(recordings):
+        n = rec.n_samples
+        if window is None:
+            length = n
+        else:
+            length = int(round(window / rec.dt)) + 1
+            if length < 3:
+                raise GMRInputError(f"window {window} s is shorter than 2 samples of {rec.name} (dt {rec.dt} s)")
+            if length > n:
+                raise GMRInputError(
+                    f"window {window} s is longer than recording {rec.name} ({(n - 1) * rec.dt:.3g} s); "
+                    f"use a shorter window"
+                )
+        starts = np.arange(0, n - length + 1, length - 1)
+        if max_windows is not None and starts.size > max_windows:
+            starts = starts[np.unique(np.round(np.linspace(0, starts.size - 1, max_windows)).astype(int))]
+        b, f = rec.inputs()
+        std = np.std(rec.x, axis=0)
+        lo_d, hi_d = rec.x.min(axis=0), rec.x.max(axis=0)
+        span = np.maximum(hi_d - lo_d, 1e-12)
+        idx = starts[:, None] + np.arange(length)[None, :]
+        g = groups.setdefault(length, [])
+        for i, s in enumerate(starts):
+            g.append(dict(t=rec.t[idx[i]], x=rec.x[idx[i]], v0=rec.v[s], base_acc=b[idx[i]], force=f[idx[i]],
+                          scale=std, lo=lo_d - box_ranges * span, hi=hi_d + box_ranges * span, record=k))
+    out = []
+    for length in sorted(groups):
+        g = groups[length]
+        out.append(Windows(**{key: jnp.asarray(np.stack([w[key] for w in g])) for key in
+                              ("t", "x", "v0", "base_acc", "force", "scale", "lo", "hi")},
+                           record=np.array([w["record"] for w in g])))
+    return out
+
+
+def solve_window(
+    model: AbstractMechanicalModel,
+    t: Float[Array, " samples"],
+    x0: Float[Array, " dof"],
+    v0: Float[Array, " dof"],
+    base_acc: Float[Array, " samples"],
+    force: Float[Array, "samples dof"],
+    lo: Float[Array, " dof"],
+    hi: Float[Array, " dof"],
+    stride: int,
+    integrator: Integrator,
+    adjoint: dfx.AbstractAdjoint,
+) -> tuple[Float[Array, "saved dof"], Int[Array, ""]]:
+    """Simulate one window from its measured start state (x0, v0) under the sampled inputs.
+
+    Saves x at `t[stride::stride]`. Returns (x, ok): `ok` is false if the solver failed, hit
+    `max_steps`, or the state left the box [lo, hi] (then the solve stops there; x is not
+    meaningful and the caller must not use it)."""
+    d = x0.shape[0]
+    inputs = Sampled(t=t, base_acc=base_acc, force=force, n_dof=d)
+    ts = t[stride::stride]
+    # the sampled input is piecewise linear: land a step on every sample (its kinks)
+    traj = integrate(vector_field(model, inputs), t[0], ts[-1], (x0, v0), integrator, saveat=dfx.SaveAt(ts=ts),
+                     box=(lo, hi), step_ts=t, adjoint=adjoint)
+    return traj.ys[0], traj.result._value
+
+
+def simulate_windows(model, w: Windows, stride: int, integrator: Integrator, adjoint) -> tuple[Array, Array]:
+    """vmap of `solve_window` over a `Windows` group: x (W, saved, D), RESULTS values (W,)."""
+
+    def one(t, x, v0, b, f, lo, hi):
+        return solve_window(model, t, x[0], v0, b, f, lo, hi, stride, integrator, adjoint)
+
+    return jax.vmap(one)(w.t, w.x, w.v0, w.base_acc, w.force, w.lo, w.hi)
+
+
+@dataclass(frozen=True)
+class OutputError:
+    """Output error of a model on recordings: `nrmse` is the RMS over all windows, samples and
+    DOFs of (simulated x - measured x) / std of the recording's x for that DOF (inf if any
+    window failed); `failed` windows out of `windows`."""
+
+    nrmse: float
+    failed: int
+    windows: int
+
+    def as_dict(self) -> dict:
+        return {"nrmse": self.nrmse, "failed": self.failed, "windows": self.windows}
+
+
+@eqx.filter_jit
+def _window_errors(model, groups, stride, integrator):
+    out = []
+    for w in groups:
+        xs, codes = simulate_windows(model, w, stride, integrator, dfx.ForwardMode())  # no AD here
+        ok = codes == RESULTS.successful._value
+        e = (xs - w.x[:, stride::stride]) / w.scale[:, None, :]
+        out.append((jnp.sum(jnp.where(ok[:, None, None], e, 0.0) ** 2, axis=(1, 2)), e[0].size, codes))
+    return out
+
+
+def output_error(
+    model: AbstractMechanicalModel,
+    recordings,
+    window: float | None = None,
+    *,
+    integrator: Integrator = Integrator(rtol=1e-8, atol=1e-10, max_steps=100_000),
+    box_ranges: float = 10.0,
+    max_windows: int | None = None,
+    throw: bool = False,
+) -> Solution:
+    """Output NRMSE of `model` on `recordings`: simulated from measured start states, in windows
+    of `window` seconds (None: each whole record from its first sample), compared with the
+    measured x (see `OutputError`). The model is used as given (exact sgn(v) if `sign_eps=0`).
+
+    **Returns:** a `Solution` whose `value` is an `OutputError` (nrmse inf when a window
+    failed), `result` the first failed window's code (`diverged`: it left the data range
+    widened by `box_ranges` ranges; `max_steps_reached`, ...), `stats["codes"]` every window's
+    code name. `throw` (default False: a model that cannot follow the data is an answer here)
+    raises `GMRComputationError` instead."""
+    recs = prepare(recordings, model.n_dof, model.topology)
+    groups = make_windows(recs, window, box_ranges, max_windows)
+    res = _window_errors(model, groups, 1, integrator)
+    codes = np.concatenate([np.asarray(c).reshape(-1) for *_, c in res])
+    ok_all = codes == RESULTS.successful._value
+    sq = sum(float(np.sum(np.asarray(s)[np.asarray(c) == RESULTS.successful._value])) for s, _, c in res)
+    cnt = sum(int(np.sum(np.asarray(c) == RESULTS.successful._value)) * n for _, n, c in res)
+    failed = int(np.sum(~ok_all))
+    nrmse = float(np.sqrt(sq / cnt)) if failed == 0 and cnt else float("inf")
+    err = OutputError(nrmse=nrmse, failed=failed, windows=int(codes.size))
+    result = as_result(int(codes[~ok_all][0])) if failed else RESULTS.successful
+    sol = Solution(value=err, result=result, stats={"codes": [code_name(c) for c in codes]})
+    return raise_if_failed(sol, throw, "output_error", f"{failed} of {codes.size} windows")

@@ -1,0 +1,87 @@
+"""The public surface: no name that is both a module and an object, no private imports outside
+the package, a version from the package metadata."""
+
+import ast
+import importlib
+import pkgutil
+from pathlib import Path
+
+import gmr_jax
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_no_public_name_shadows_a_submodule():
+    submodules = {m.name for m in pkgutil.iter_modules(gmr_jax.__path__)}
+    for name in gmr_jax.__all__ if hasattr(gmr_jax, "__all__") else dir(gmr_jax):
+        if name.startswith("_") or name not in submodules:
+            continue
+        # a public submodule is fine only when the attribute *is* that module
+        mod = importlib.import_module(f"gmr_jax.{name}")
+        assert getattr(gmr_jax, name) is mod, f"gmr_jax.{name} hides the submodule gmr_jax.{name}"
+    # importing every submodule must not rebind a public name to something else
+    before = {n: getattr(gmr_jax, n) for n in dir(gmr_jax) if not n.startswith("_")}
+    for m in pkgutil.walk_packages(gmr_jax.__path__, "gmr_jax."):
+        importlib.import_module(m.name)
+    after = {n: getattr(gmr_jax, n) for n in before}
+    changed = [n for n in before if before[n] is not after[n]]
+    assert not changed, f"importing submodules rebinds gmr_jax.{changed}"
+    for name in ("systems", "metrics", "data", "plots"):
+        for attr in dir(getattr(gmr_jax, name)):
+            if attr.startswith("_"):
+                continue
+            sub = f"gmr_jax.{name}.{attr}"
+            if importlib.util.find_spec(sub) is not None:
+                raise AssertionError(f"{sub} is both a module and a name")
+
+
+def _private_imports(path: Path) -> list[str]:
+    if path.suffix == ".ipynb":
+        import json
+
+        cells = json.loads(path.read_text())["cells"]
+        source = "\n".join("".join(c["source"]) for c in cells if c["cell_type"] == "code")
+        source = "\n".join(line for line in source.splitlines() if not line.lstrip().startswith(("%", "!")))
+    else:
+        source = path.read_text()
+    bad = []
+    for node in ast.walk(ast.parse(source)):
+        names = []
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+        elif isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
+            if node.value.id in ("g", "gmr", "gmr_jax") and node.attr.startswith("_") \
+                    and node.attr not in ("__version__",):
+                bad.append(f"{node.value.id}.{node.attr}")
+        for n in names:
+            parts = n.split(".")
+            if parts[0] == "gmr_jax" and any(p.startswith("_") for p in parts[1:]):
+                bad.append(n)
+    return bad
+
+
+def test_notebooks_studies_and_benchmarks_use_only_the_public_api():
+    files = [p for d in ("notebooks", "studies", "benchmarks") for p in (ROOT / d).rglob("*")
+             if p.suffix in (".py", ".ipynb") and ".ipynb_checkpoints" not in p.parts]
+    assert files, "no notebooks, studies or benchmarks found"
+    offenders = {str(p.relative_to(ROOT)): b for p in files if (b := _private_imports(p))}
+    assert not offenders, f"private gmr_jax imports outside the package: {offenders}"
+
+
+def test_private_import_detector_catches_each_form(tmp_path):
+    p = tmp_path / "x.py"
+    p.write_text("import gmr_jax._fit\nfrom gmr_jax._simulate import _integrate\n"
+                 "from gmr_jax.systems import _kresling\nimport gmr_jax as g\ng._solution\n")
+    assert len(_private_imports(p)) >= 4
+
+
+def test_version_comes_from_metadata():
+    import importlib.metadata as md
+
+    try:
+        assert gmr_jax.__version__ == md.version("gmr_jax")
+    except md.PackageNotFoundError:
+        assert gmr_jax.__version__ == "0+unknown"
+    assert (Path(gmr_jax.__file__).parent / "py.typed").exists()
