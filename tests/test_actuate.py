@@ -118,7 +118,7 @@ def test_cli_actuate(tmp_path):
     g.save_model(MODEL, path)
     out = tmp_path / "act"
     rc = main(["actuate", str(path), "--target", "1-1", "--out", str(out), "--f-range", "0.05:1", "--A-range",
-               "0.1:3", "--x-range=-2:2", "--settle-time", "30", "--grid", "6", "--seeds", "2", "--sign-eps", "0.01"])
+               "0.1:3", "--settle-time", "30", "--grid", "6", "--seeds", "2", "--sign-eps", "0.01"])
     assert rc == 0
     res = json.loads((out / "actuation.json").read_text())
     assert res["kind"] == "half_sine" and res["A"] > 0 and res["f"] > 0

@@ -4,27 +4,84 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._model._model import AbstractMechanicalModel
+from .._errors import GMRInputError
+from .._model._model import AbstractMechanicalModel, GlobalModel
 
 
-def stable_wells(model: AbstractMechanicalModel, x_range, n: int = 20001) -> np.ndarray:
+def _check_range(x_range, d: int) -> np.ndarray:
+    try:
+        r = np.asarray(x_range, float)
+    except (TypeError, ValueError):
+        raise GMRInputError(f"x_range must be numbers: (lo, hi) or one (lo, hi) per DOF, got {x_range!r}") from None
+    if r.shape == (2,):
+        r = np.broadcast_to(r, (d, 2))
+    if r.shape != (d, 2):
+        raise GMRInputError(f"x_range must be (lo, hi) or ({d}, 2), one interval per DOF; got shape {r.shape}")
+    for i, (lo, hi) in enumerate(r):
+        if not (np.isfinite(lo) and np.isfinite(hi)) or lo >= hi:
+            raise GMRInputError(f"x_range of DOF {i} is [{lo}, {hi}]: need finite lo < hi (is it inverted?)")
+    return r
+
+
+def polynomial_wells(model: GlobalModel, x_range=None) -> list[np.ndarray]:
+    """Real stable zeros (F_i = 0, dF_i/dx > 0) of each DOF's restoring polynomial
+    F_i(x) = sum_k stiffness[i, k] x^k (paper Eq. 1 at rest), by the polynomial's companion
+    matrix and two Newton steps; only those inside `x_range` (dof, 2) when it is given."""
+    k = np.asarray(model.stiffness, float)
+    out = []
+    for i in range(model.n_dof):
+        c = np.trim_zeros(k[i], "b")
+        if c.size < 2:
+            out.append(np.zeros(0))
+            continue
+        r = np.roots(c[::-1])
+        scale = max(1.0, float(np.max(np.abs(r)))) if r.size else 1.0
+        r = np.sort(r[np.abs(r.imag) <= 1e-7 * scale].real)
+        dc = c[1:] * np.arange(1, c.size)
+        for _ in range(2):  # polish on the polynomial itself
+            fr, dfr = np.polyval(c[::-1], r), np.polyval(dc[::-1], r)
+            r = np.where(dfr != 0, r - fr / np.where(dfr != 0, dfr, 1.0), r)
+        stable = np.polyval(dc[::-1], r) > 0
+        r = r[stable]
+        if x_range is not None:
+            r = r[(r >= x_range[i, 0]) & (r <= x_range[i, 1])]
+        out.append(np.unique(r))
+    return out
+
+
+def stable_wells(model: AbstractMechanicalModel, x_range=None, n: int = 20001) -> np.ndarray:
     """Stable zeros of each DOF's restoring force, ordered by increasing deformation.
 
-    `x_range`: (dof, 2) search interval per DOF. Returns (dof, max_wells), NaN-padded. With no
-    external load each cell of a chain is at rest only where its own F_i(x_i) = 0."""
-    x_range = np.asarray(x_range, float).reshape(-1, 2)
+    `x_range`: (lo, hi) or (dof, 2) search interval per DOF. Without it the wells of a polynomial
+    `GlobalModel` are the real stable roots of each DOF's restoring polynomial (every one: give an
+    `x_range`, e.g. the span of the training data, to drop outer roots that lie outside it); other
+    models need an `x_range`, searched on an `n`-point grid. Returns (dof, max_wells),
+    NaN-padded. With no external load each cell of a chain is at rest only where its own
+    F_i(x_i) = 0."""
     d = model.n_dof
-    out = []
-    for i in range(d):
-        xs = np.linspace(*x_range[i], n)
+    if x_range is None:
+        if not isinstance(model, GlobalModel):
+            raise GMRInputError(
+                f"stable_wells: a {type(model).__name__} has no polynomial restoring force; give "
+                "x_range=(lo, hi), the deformation interval in which to search for wells"
+            )
+        out = polynomial_wells(model)
+    else:
+        x_range = _check_range(x_range, d)
+        if isinstance(model, GlobalModel):
+            out = polynomial_wells(model, x_range)
+        else:
+            out = []
+            for i in range(d):
+                xs = np.linspace(*x_range[i], n)
 
-        def f(x, i=i):
-            return model.restoring(jnp.zeros(d).at[i].set(x))[i]
+                def f(x, i=i):
+                    return model.restoring(jnp.zeros(d).at[i].set(x))[i]
 
-        fx = np.asarray(jax.vmap(f)(jnp.asarray(xs)))
-        idx = np.nonzero((fx[:-1] < 0) & (fx[1:] >= 0))[0]  # increasing crossing: stable
-        roots = xs[idx] - fx[idx] * (xs[idx + 1] - xs[idx]) / (fx[idx + 1] - fx[idx])
-        out.append(roots)
+                fx = np.asarray(jax.vmap(f)(jnp.asarray(xs)))
+                idx = np.nonzero((fx[:-1] < 0) & (fx[1:] >= 0))[0]  # increasing crossing: stable
+                roots = xs[idx] - fx[idx] * (xs[idx + 1] - xs[idx]) / (fx[idx + 1] - fx[idx])
+                out.append(roots)
     width = max(1, max(len(r) for r in out))
     wells = np.full((d, width), np.nan)
     for i, r in enumerate(out):

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import GMRInputError
-from ._args import interval, x_range
+from ._args import find_wells, interval, output_dir, positive_float, positive_int
 
 
 def register(sub):
@@ -20,14 +20,15 @@ def register(sub):
                    help="Eq. (25) half-sine (f, A), or a sampled tip force history")
     a.add_argument("--f-range", default="0.1:5", help="half-sine frequencies searched, LO:HI (Hz)")
     a.add_argument("--A-range", default="0.02:1", help="half-sine amplitudes searched, LO:HI (force units)")
-    a.add_argument("--x-range", default=None, help="LO:HI deformation interval to search for wells")
-    a.add_argument("--settle-time", type=float, default=10.0, help="free time after the load (s)")
+    a.add_argument("--x-range", default=None, help="LO:HI deformation interval to search for wells (default: "
+                   "the stable roots of the model's restoring polynomial)")
+    a.add_argument("--settle-time", type=positive_float, default=10.0, help="free time after the load (s)")
     a.add_argument("--objective", choices=["peak", "effort"], default="peak",
                    help="minimise the peak force (default) or the integral of F^2 dt")
-    a.add_argument("--grid", type=int, default=24, help="seed grid points per axis (default 24)")
-    a.add_argument("--seeds", type=int, default=6, help="seeds refined along the basin boundary (default 6)")
-    a.add_argument("--knots", type=int, default=24, help="samples of the force history (--kind samples)")
-    a.add_argument("--sign-eps", type=float, default=1e-3,
+    a.add_argument("--grid", type=positive_int, default=24, help="seed grid points per axis (default 24)")
+    a.add_argument("--seeds", type=positive_int, default=6, help="seeds refined along the basin boundary (default 6)")
+    a.add_argument("--knots", type=positive_int, default=24, help="samples of the force history (--kind samples)")
+    a.add_argument("--sign-eps", type=positive_float, default=1e-3,
                    help="sgn(v) -> tanh(v/eps) inside differentiated solves (models with sgn(v) terms)")
     a.set_defaults(fn=run)
     return a
@@ -38,16 +39,16 @@ def run(args):
     from gmr_jax import RESULTS
     from gmr_jax.plots import config_label
 
+    out = output_dir(args.out)
     model = gmr.load_model(args.model)
     if model.topology.name != "chain":
         raise GMRInputError("gmr actuate needs a chain model (topology 'chain'): the load is a tip force")
-    if not args.x_range:
-        raise GMRInputError("--x-range=LO:HI is needed: the deformation interval in which to look for wells")
-    lo, hi = x_range(args.x_range)
-    wells = gmr.stable_wells(model, [[lo, hi]] * model.n_dof)
+    wells, how = find_wells(model, args.x_range, args.model)
     if wells.shape[1] < 2 or np.any(np.isnan(wells[:, :2])):
-        raise GMRInputError(f"some cell has fewer than two stable wells in [{lo}, {hi}]: widen --x-range "
-                            "(every cell must be bistable to be actuated)")
+        few = [i for i in range(model.n_dof) if np.sum(~np.isnan(wells[i])) < 2]
+        raise GMRInputError(f"cells {few} have fewer than two stable wells ({how}): every cell must be bistable "
+                            "to be actuated" + ("; widen --x-range" if args.x_range else "; give --x-range=LO:HI"))
+    print(f"gmr actuate: wells per cell {[np.round(w[~np.isnan(w)], 6).tolist() for w in wells]} ({how})")
     if args.grid < 2 or args.seeds < 1 or args.knots < 3 or not args.settle_time > 0 or not args.sign_eps > 0:
         raise GMRInputError("need --grid >= 2, --seeds >= 1, --knots >= 3, --settle-time > 0, --sign-eps > 0")
     settings = gmr.ActuateSettings(
@@ -57,8 +58,6 @@ def run(args):
     )
     sol = gmr.actuate(model, args.target, kind=args.kind, settings=settings, wells=wells, throw=False)
     act, st = sol.value, sol.stats
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     reached = bool(sol.result == RESULTS.successful)
     found = act.f is not None if act.kind == "half_sine" else act.t is not None
     doc = act.to_json() if found else {"kind": act.kind}

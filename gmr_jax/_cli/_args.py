@@ -8,10 +8,82 @@ from .._errors import GMRInputError
 
 
 def positive_int(s):
-    v = int(s)
+    try:
+        v = int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {s!r}") from None
     if v < 1:
-        raise argparse.ArgumentTypeError("must be >= 1")
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
     return v
+
+
+def positive_float(s):
+    """A finite number > 0 (times, tolerances)."""
+    try:
+        v = float(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number > 0, got {s!r}") from None
+    if not np.isfinite(v) or v <= 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {s}")
+    return v
+
+
+def tolerance(s):
+    """A relative or absolute ODE tolerance: 0 < tol < 1."""
+    v = positive_float(s)
+    if v >= 1:
+        raise argparse.ArgumentTypeError(f"must be below 1 (e.g. 1e-6), got {s}")
+    return v
+
+
+#: options whose values may start with '-' (argparse would take "-1:5:4" for an option)
+VALUE_OPTIONS = ("--f", "--A", "--x-range", "--f-range", "--A-range")
+
+
+def join_negative_values(argv):
+    """`--f -1:5:4` -> `--f=-1:5:4`, so that a range with a negative bound reaches its checker
+    (which then names the problem) instead of argparse's "expected one argument"."""
+    out, i = [], 0
+    while i < len(argv):
+        a = argv[i]
+        if a in VALUE_OPTIONS and i + 1 < len(argv) and argv[i + 1].startswith("-") \
+                and len(argv[i + 1]) > 1 and (argv[i + 1][1].isdigit() or argv[i + 1][1] == "."):
+            out.append(f"{a}={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(a)
+            i += 1
+    return out
+
+
+def output_dir(path) -> "Path":
+    """Create --out DIR before any computation, so a bad path fails in a second, not after it."""
+    from pathlib import Path
+
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise GMRInputError(f"--out {out}: exists and is not a directory; give a directory to write into")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".gmr_write_test"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as e:
+        raise GMRInputError(f"--out {out}: cannot write there ({e.strerror}); give a writable directory") from None
+    return out
+
+
+def output_file(path) -> "Path":
+    """Check that --out FILE can be written before any computation."""
+    from pathlib import Path
+
+    out = Path(path)
+    if out.is_dir():
+        raise GMRInputError(f"--out {out}: is a directory; give a file name, e.g. {out / 'model.json'}")
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir():
+        raise GMRInputError(f"--out {out}: the folder {parent} does not exist; create it or choose another path")
+    return out
 
 
 def grid(spec, name):
@@ -21,8 +93,15 @@ def grid(spec, name):
         a, b, n = float(a), float(b), int(n)
     except ValueError:
         raise GMRInputError(f"--{name} must be START:STOP:NUM, e.g. 0.1:5:50, got {spec!r}") from None
-    if n < 1 or not (np.isfinite(a) and np.isfinite(b)) or (name == "f" and min(a, b) <= 0):
-        raise GMRInputError(f"--{name} {spec!r}: need NUM >= 1, finite bounds (and f > 0)")
+    if n < 1 or not (np.isfinite(a) and np.isfinite(b)):
+        raise GMRInputError(f"--{name} {spec!r}: need NUM >= 1 and finite bounds")
+    if name == "f" and min(a, b) <= 0:
+        raise GMRInputError(f"--f {spec!r}: frequencies must be > 0 Hz, e.g. 0.1:5:50")
+    if name == "A" and min(a, b) < 0:
+        raise GMRInputError(f"--A {spec!r}: amplitudes must be >= 0 (the half-sine's sign is fixed), e.g. 0.02:1:50")
+    if n > 1 and a == b:
+        raise GMRInputError(f"--{name} {spec!r}: START equals STOP with NUM > 1 (every point the same); "
+                            "use NUM 1 or widen the range")
     return np.linspace(a, b, n)
 
 
@@ -46,6 +125,67 @@ def x_range(spec):
     if a is None or not (np.isfinite(a) and np.isfinite(b)) or a >= b:
         raise GMRInputError(f"--x-range must be LO:HI (write --x-range=-0.05:0.05), got {spec!r}")
     return a, b
+
+
+def find_wells(model, spec, model_path=None):
+    """Stable wells per DOF and a sentence saying where they came from.
+
+    With --x-range: the stable zeros inside it. Without: the real stable roots of each DOF's
+    restoring polynomial, restricted to the model file's `data_range` (written by `gmr fit`)
+    widened by half its width when present; otherwise an isolated outer root (farther from its
+    neighbour than 10x the widest gap between the others) is dropped as a spurious outer well
+    of the fitted polynomial and named."""
+    import json
+
+    import gmr_jax as gmr
+    from .._basins._wells import polynomial_wells
+
+    d = model.n_dof
+    if spec:
+        lo, hi = x_range(spec)
+        wells = gmr.stable_wells(model, [[lo, hi]] * d)
+        how = f"stable zeros in --x-range [{lo}, {hi}]"
+    else:
+        box = None
+        if model_path is not None:
+            try:
+                box = json.loads(open(model_path).read()).get("data_range")
+            except (OSError, ValueError, AttributeError):
+                box = None
+        if box is not None:
+            box = np.asarray(box, float).reshape(d, 2)
+            w = box[:, 1] - box[:, 0]
+            box = np.stack([box[:, 0] - 0.5 * w, box[:, 1] + 0.5 * w], 1)
+            roots = polynomial_wells(model, box)
+            how = "stable roots of the restoring polynomial within the training data range (+-50 %)"
+        else:
+            roots, dropped = [], []
+            for i, r in enumerate(polynomial_wells(model)):
+                while r.size >= 3:
+                    gaps = np.diff(r)
+                    if gaps[0] > 10 * np.max(gaps[1:]):
+                        dropped.append((i, r[0]))
+                        r = r[1:]
+                    elif gaps[-1] > 10 * np.max(gaps[:-1]):
+                        dropped.append((i, r[-1]))
+                        r = r[:-1]
+                    else:
+                        break
+                roots.append(r)
+            how = "stable roots of the restoring polynomial"
+            if dropped:
+                how += "; dropped as spurious outer roots: " + ", ".join(f"DOF {i} at {x:.6g}" for i, x in dropped) + \
+                       " (give --x-range to choose the wells yourself)"
+        width = max(1, max(len(r) for r in roots))
+        wells = np.full((d, width), np.nan)
+        for i, r in enumerate(roots):
+            wells[i, : len(r)] = r
+    empty = [i for i in range(d) if np.all(np.isnan(wells[i]))]
+    if empty:
+        where = f"in --x-range {spec}" if spec else "(its restoring polynomial has no real root with positive slope)"
+        raise GMRInputError(f"DOF {empty} of the model has no stable equilibrium {where}; "
+                            "check the model's stiffness terms" + ("" if spec else " or give --x-range=LO:HI"))
+    return wells, how
 
 
 def start_configuration(spec, wells):

@@ -5,8 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._errors import GMRInputError
-from ._args import grid, positive_int, start_configuration, x_range
+from ._args import find_wells, grid, output_dir, positive_float, positive_int, start_configuration, tolerance
 
 
 def register(sub):
@@ -14,15 +13,17 @@ def register(sub):
     b.add_argument("model", help="gmr-model/1 JSON")
     b.add_argument("--f", required=True, help="frequencies START:STOP:NUM (Hz)")
     b.add_argument("--A", required=True, help="amplitudes START:STOP:NUM (force units)")
-    b.add_argument("--x-range", default=None, help="LO:HI deformation interval to search for wells")
-    b.add_argument("--settle-time", type=float, default=10.0, help="free time after the load (s)")
+    b.add_argument("--x-range", default=None, help="LO:HI deformation interval to search for wells (default: the "
+                   "stable roots of the model's restoring polynomial, within the training data range when the file "
+                   "records it)")
+    b.add_argument("--settle-time", type=positive_float, default=10.0, help="free time after the load (s)")
     b.add_argument("--load", choices=["tip", "base"], default="tip",
                    help="tip: force A sin(2 pi f t) on the last mass (Eq. 25, default); base: the same half-sine "
                    "as base acceleration (A in m/s^2)")
     b.add_argument("--start", default=None, help="start configuration, e.g. 0-0-0-0-0 (default: every DOF in its "
                    "first well)")
-    b.add_argument("--rtol", type=float, default=1e-6)
-    b.add_argument("--atol", type=float, default=1e-8)
+    b.add_argument("--rtol", type=tolerance, default=1e-6, help="relative tolerance, 0 < rtol < 1 (default 1e-6)")
+    b.add_argument("--atol", type=tolerance, default=1e-8, help="absolute tolerance, 0 < atol < 1 (default 1e-8)")
     b.add_argument("--batching", choices=["joint", "member"], default="joint",
                    help="joint: each chunk as one ODE with a shared step (default, faster); member: one solve per point")
     b.add_argument("--chunk", type=positive_int, default=None,
@@ -42,23 +43,17 @@ def run(args) -> int:
 
     from ..plots import basin_figure, config_label
 
-    model = gmr.load_model(args.model)
     f, A = grid(args.f, "f"), grid(args.A, "A")
-    if not args.x_range:
-        raise GMRInputError("--x-range=LO:HI is needed: the deformation interval in which to look for wells")
-    lo, hi = x_range(args.x_range)
-    wells = gmr.stable_wells(model, [[lo, hi]] * model.n_dof)
-    if np.any(np.isnan(wells[:, 0])):
-        raise GMRInputError(f"no stable equilibrium found in [{lo}, {hi}] for some DOF: widen --x-range")
+    out = output_dir(args.out)
+    model = gmr.load_model(args.model)
+    wells, how = find_wells(model, args.x_range, args.model)
     x0 = start_configuration(args.start, wells)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     settings = gmr.SweepSettings(settle_time=args.settle_time, load=args.load, batching=args.batching,
                                  integrator=gmr.Integrator(rtol=args.rtol, atol=args.atol, max_steps=100_000))
     n = f.size * A.size
     devs = jax.devices()
     print(f"gmr basins: {n} points ({A.size} amplitudes x {f.size} frequencies), {args.load} half-sine (Eq. 25), "
-          f"wells per DOF: {[np.round(w[~np.isnan(w)], 6).tolist() for w in wells]}; "
+          f"wells per DOF: {[np.round(w[~np.isnan(w)], 6).tolist() for w in wells]} ({how}); "
           f"{len(devs)} {devs[0].platform} device(s)" + (f" ({n_cpu} CPU cores)" if devs[0].platform == "cpu" else ""))
     t0 = time.perf_counter()
 

@@ -23,6 +23,9 @@ def register(sub):
 
 
 def run(args) -> int:
+    from ._args import output_dir
+
+    output_dir(args.out)
     if args.system == "paper":
         run_demo(args.out)
     else:

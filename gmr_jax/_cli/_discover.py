@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import GMRInputError
+from ._args import output_dir
 
 
 def register(sub):
@@ -48,13 +49,12 @@ def run(args) -> int:
         raise GMRInputError(f"--n-boot must be at least 20, got {args.n_boot}")
     if args.decimate < 1:
         raise GMRInputError(f"--decimate must be >= 1, got {args.decimate}")
+    out = output_dir(args.out)
     model = gmr.load_model(args.model)
     recs = [gmr.load_recording(p) for p in args.recordings]
     hold = [gmr.load_recording(p) for p in args.holdout]
     rule = gmr.SelectionRule(alpha=args.alpha, n_boot=args.n_boot)
     rep = gmr.discover(model, recs, hold, rule=rule, form=args.form, decimate=args.decimate, error=args.error).value
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     gmr.save_model(rep.model, out / "augmented_model.json", method="gmr discover",
                discovered=[{k: f[k] for k in ("dof", "physics", "coefficient", "ci95")} for f in rep.findings])
     d = rep.to_dict("augmented_model.json")

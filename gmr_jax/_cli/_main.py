@@ -2,16 +2,20 @@
 does the work); formats and shapes are those of the contracts (README, "File formats").
 
 Exit status: 0 success; 1 the computation failed (its RESULTS code is named); 2 the input was
-wrong (the message names the file, option or value and the fix).
+wrong (the message names the file, option or value and the fix); 3 an internal error (a bug in
+gmr_jax: one line naming it; `GMR_DEBUG=1` shows the traceback). Output piped into a reader that
+closes early (`gmr basins ... | head`) does not stop the computation.
 """
 
 import argparse
 import json
+import os
 import sys
 
 from .._errors import GMRInputError
 from .._solution import GMRComputationError
 from . import _actuate, _basins, _demo, _discover, _fit, _refine
+from ._args import join_negative_values
 
 COMMANDS = (_demo, _fit, _basins, _discover, _actuate, _refine)
 
@@ -24,8 +28,42 @@ def build_parser():
     return p
 
 
+class _QuietWhenClosed:
+    """stdout that keeps the computation going when its reader goes away (`gmr ... | head`):
+    the first BrokenPipeError sends the rest of the output to /dev/null."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def _closed(self):
+        try:  # the file descriptor too, so that the interpreter's flush at exit is quiet
+            os.dup2(os.open(os.devnull, os.O_WRONLY), self._stream.fileno())
+        except (OSError, ValueError, AttributeError):
+            pass
+        self._stream = open(os.devnull, "w")
+
+    def write(self, s):
+        try:
+            return self._stream.write(s)
+        except BrokenPipeError:
+            self._closed()
+            return len(s)
+
+    def flush(self):
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            self._closed()
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 def main(argv=None) -> int:
+    argv = join_negative_values(sys.argv[1:] if argv is None else list(argv))
     args = build_parser().parse_args(argv)
+    stdout = sys.stdout
+    sys.stdout = _QuietWhenClosed(stdout)
     try:
         return args.fn(args)
     except GMRInputError as e:
@@ -37,6 +75,14 @@ def main(argv=None) -> int:
     except GMRComputationError as e:
         print(f"gmr {args.cmd}: the computation failed: {e}", file=sys.stderr)
         return 1
+    except Exception as e:  # a bug, not the user's input: one line, the traceback on request
+        if os.environ.get("GMR_DEBUG"):
+            raise
+        print(f"gmr {args.cmd}: internal error ({type(e).__name__}: {e}); this is a bug in gmr_jax, "
+              "please report it with the command (GMR_DEBUG=1 shows the traceback)", file=sys.stderr)
+        return 3
+    finally:
+        sys.stdout = stdout
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@
 import numpy as np
 
 from .._errors import GMRInputError
+from ._args import output_file
 
 
 def register(sub):
@@ -36,6 +37,7 @@ def run(args) -> int:
         raise GMRInputError("--max-iterations, --stride and --max-windows must be >= 1")
     if not (np.isfinite(args.window) and args.window > 0):
         raise GMRInputError(f"--window must be a positive number of seconds, got {args.window}")
+    output_file(args.out)
     model = gmr.load_model(args.model)
     train = [gmr.load_recording(p) for p in args.recordings]
     hold = [gmr.load_recording(p) for p in args.holdout] if args.holdout else None
