@@ -19,6 +19,9 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from gmr_jax import (
+    AbstractTopology,
+    Chain,
+    Independent,
     Integrator,
     Recording,
     Sampled,
@@ -214,7 +217,7 @@ def calibrate(terms, masses, topology, recs, form: str) -> "object":
     """Least-squares equation-error calibration of the model structure `terms` (their
     coefficients are refitted; masses kept) on the recordings (completed)."""
     masses = np.asarray(masses, float)
-    topo = from_terms(masses, [], topology).topology
+    topo = topology if isinstance(topology, AbstractTopology) else {"chain": Chain(), "independent": Independent()}[topology]
     d = len(masses)
     out = []
     for i in range(d):

@@ -13,7 +13,7 @@ from jax.sharding import Mesh
 from jax.sharding import PartitionSpec as P
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from .._errors import GMRInputError
+from .._errors import GMRInputError, check_real, describe
 from .._model._model import AbstractMechanicalModel
 from .._simulate._inputs import half_sine
 from .._simulate._integrate import Integrator, integrate, vector_field
@@ -52,10 +52,23 @@ class SweepSettings(eqx.Module):
     batching: str = eqx.field(static=True, default="joint")
 
     def __check_init__(self):
-        if self.load not in LOADS:
-            raise GMRInputError(f"SweepSettings.load must be one of {LOADS}, got {self.load!r}")
-        if self.batching not in BATCHINGS:
-            raise GMRInputError(f"SweepSettings.batching must be one of {BATCHINGS}, got {self.batching!r}")
+        # plain Python on concrete values; tracers (settings built inside jit) are not inspected
+        if not isinstance(self.load, str) or self.load not in LOADS:
+            raise GMRInputError(f"SweepSettings.load must be one of {LOADS}, got {describe(self.load)}")
+        if not isinstance(self.batching, str) or self.batching not in BATCHINGS:
+            raise GMRInputError(f"SweepSettings.batching must be one of {BATCHINGS}, got {describe(self.batching)}")
+        check_real(self.settle_time, "SweepSettings.settle_time", lo=0.0, lo_open=True,
+                   fix="give the free time after the actuation in seconds, > 0 (e.g. 10.0)")
+        check_real(self.x_tol, "SweepSettings.x_tol", lo=0.0, lo_open=True,
+                   fix="give the well tolerance as a fraction of the wells' span, > 0 (e.g. 0.1)")
+        check_real(self.v_tol, "SweepSettings.v_tol", lo=0.0, lo_open=True,
+                   fix="give the settling velocity tolerance as a fraction of span/s, > 0 (e.g. 0.05)")
+        check_real(self.box_spans, "SweepSettings.box_spans", lo=0.5, lo_open=True,
+                   fix="the divergence box must contain the wells (they lie within 0.5 span of the "
+                       "centre); e.g. 20.0")
+        if not isinstance(self.integrator, Integrator):
+            raise GMRInputError(f"SweepSettings.integrator must be a gmr_jax.Integrator, got "
+                                f"{type(self.integrator).__name__}")
 
 
 class BasinMap(eqx.Module):

@@ -161,7 +161,7 @@ def _augment(model: GlobalModel, corrections, new_terms, mass_corr) -> GlobalMod
     terms = model.terms() + [dict(c) for c in corrections] + [dict(t) for t in new_terms]
     masses = np.asarray(model.masses) + mass_corr
     return from_terms(masses, [{k: t[k] for k in ("dof", "physics", "order", "coefficient")} for t in terms],
-                      model.topology)
+                      model.topology, duplicates="add")
 
 
 def discover(

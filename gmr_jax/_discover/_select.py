@@ -37,6 +37,8 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.stats import f as f_dist
 
+from .._errors import as_whole_number, check_real
+
 
 @dataclass(frozen=True)
 class SelectionRule:
@@ -51,6 +53,25 @@ class SelectionRule:
     max_new: int = 4
     seed: int = 0
     min_explained: float = 0.02
+
+    def __post_init__(self):
+        check_real(self.alpha, "SelectionRule.alpha", lo=0.0, hi=1.0, lo_open=True, hi_open=True,
+                   fix="give the family-wise false-discovery level, e.g. 0.05")
+        check_real(self.min_cv_gain, "SelectionRule.min_cv_gain", lo=0.0, hi=1.0, hi_open=True,
+                   fix="give the least relative drop of the cross-validation error, e.g. 0.01")
+        as_whole_number(self.n_folds, "SelectionRule.n_folds", lo=2, fix="give the number of CV blocks, e.g. 5")
+        as_whole_number(self.n_boot, "SelectionRule.n_boot", lo=1,
+                        fix="give the number of bootstrap replicates, e.g. 200")
+        check_real(self.stability, "SelectionRule.stability", lo=0.0, hi=1.0,
+                   fix="give the least share of bootstrap replicates that must select a term, e.g. 0.8")
+        if self.block is not None:
+            as_whole_number(self.block, "SelectionRule.block", lo=1,
+                            fix="give the bootstrap block length in rows, or None for the automatic one")
+        as_whole_number(self.max_new, "SelectionRule.max_new", lo=0,
+                        fix="give the most new terms per DOF, e.g. 4")
+        as_whole_number(self.seed, "SelectionRule.seed", lo=0, fix="give a non-negative integer seed")
+        check_real(self.min_explained, "SelectionRule.min_explained", lo=0.0, hi=1.0,
+                   fix="give the least share of the model's residual a kept term must explain, e.g. 0.02")
 
 
 def _masked_solve(G, b, mask):

@@ -5,6 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, Float
+from .._errors import GMRInputError, as_whole_number, describe
 
 # `physics` names of the "gmr-model/1" format, per family.
 STIFFNESS = "stiffness"
@@ -42,6 +43,16 @@ class Library(eqx.Module):
     damping_order: int = eqx.field(static=True, default=5)
     velocity_damping: bool = eqx.field(static=True, default=True)
     position_damping: bool = eqx.field(static=True, default=True)
+
+    def __check_init__(self):
+        as_whole_number(self.restoring_order, "Library.restoring_order", lo=1,
+                        fix="give the highest power of the restoring polynomial, an int >= 1 (e.g. 5)")
+        as_whole_number(self.damping_order, "Library.damping_order", lo=0,
+                        fix="give the highest power of the damping families, an int >= 0 (e.g. 5)")
+        for name in ("velocity_damping", "position_damping"):
+            val = getattr(self, name)
+            if not isinstance(val, (bool, np.bool_)):
+                raise GMRInputError(f"Library.{name} must be True or False, got {describe(val)}")
 
     def terms(self) -> list[tuple[str, int]]:
         """(physics, order) of every column, in column order."""

@@ -1,54 +1,56 @@
 """Read and write models in the "gmr-model/1" JSON format (see README, "File formats")."""
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
 
-from .._errors import GMRInputError
-from ._model import GlobalModel, from_terms
+from .._errors import GMRInputError, describe
 from .._topology import TOPOLOGIES
+from ._model import GlobalModel, check_masses, check_terms, from_terms
 
 FORMAT = "gmr-model/1"
-KNOWN_PHYSICS = ("stiffness", "velocity_damping", "position_damping")
 
 
 def model_to_dict(model: GlobalModel, **extra) -> dict:
+    terms = model.terms()
+    # a DOF whose coefficients are all zero would have no term and the file would not load
+    # back (a DOF without terms is refused): write its linear stiffness as an explicit 0
+    present = {t["dof"] for t in terms}
+    terms += [{"dof": i, "physics": "stiffness", "order": 1, "coefficient": 0.0}
+              for i in range(model.n_dof) if i not in present]
     out = {
         "format": FORMAT,
         "topology": model.topology.name,
         "masses": [float(m) for m in np.asarray(model.masses)],
-        "terms": model.terms(),
+        "terms": terms,
     }
     out.update(extra)
     return out
 
 
 def model_from_dict(d: dict, source: str = "model") -> GlobalModel:
+    """A `GlobalModel` from a "gmr-model/1" dict (the parsed JSON). Every key is checked:
+    `GMRInputError` names the bad key or term and the fix (see `from_terms`)."""
     if not isinstance(d, dict) or d.get("format") != FORMAT:
         raise GMRInputError(
             f"{source}: not a {FORMAT} model (missing or wrong 'format' key); "
             f"write it with gmr fit or see the README's model format"
         )
     topo = d.get("topology", "independent")
-    if topo not in TOPOLOGIES:
-        raise GMRInputError(f"{source}: topology must be one of {tuple(TOPOLOGIES)}, got {topo!r}")
-    try:
-        masses = np.asarray(d["masses"], dtype=float).reshape(-1)
-    except (KeyError, TypeError, ValueError):
-        raise GMRInputError(f"{source}: 'masses' must be a list of numbers, one per DOF") from None
-    if masses.size == 0 or not np.all(np.isfinite(masses)) or np.any(masses <= 0):
-        raise GMRInputError(f"{source}: masses must be finite and positive, got {masses.tolist()}")
-    terms = d.get("terms", [])
-    for t in terms:
-        if t.get("physics") not in KNOWN_PHYSICS:
-            raise GMRInputError(
-                f"{source}: unknown physics {t.get('physics')!r}; known: {', '.join(KNOWN_PHYSICS)}"
-            )
-        if not (0 <= int(t.get("dof", -1)) < masses.size):
-            raise GMRInputError(f"{source}: term {t} names a dof outside 0..{masses.size - 1}")
-        if int(t.get("order", -1)) < 0 or not np.isfinite(float(t.get("coefficient", np.nan))):
-            raise GMRInputError(f"{source}: term {t} needs an order >= 0 and a finite coefficient")
+    if not isinstance(topo, str) or topo not in TOPOLOGIES:
+        raise GMRInputError(f"{source}: 'topology' must be one of {tuple(TOPOLOGIES)}, got {describe(topo)}")
+    if "masses" not in d:
+        raise GMRInputError(f"{source}: no 'masses' key; add \"masses\": [m0, m1, ...], one per DOF")
+    masses = check_masses(d["masses"], source)
+    if "terms" not in d:
+        raise GMRInputError(f"{source}: no 'terms' key; add the list of terms, "
+                            f"e.g. {{\"dof\": 0, \"physics\": \"stiffness\", \"order\": 1, \"coefficient\": 1.0}}")
+    terms = check_terms(d["terms"], masses.size, source)
+    if "stderr" in d:
+        raise GMRInputError(f"{source}: a top-level 'stderr' is not part of {FORMAT}; give each term "
+                            f"its own \"stderr\" key")
     return from_terms(masses, terms, topo)
 
 
@@ -57,13 +59,54 @@ def save_model(model: GlobalModel, path, **extra) -> None:
     Path(path).write_text(json.dumps(model_to_dict(model, **extra), indent=1))
 
 
+def _no_duplicate_keys(pairs):
+    out = {}
+    for k, v in pairs:
+        if k in out:
+            raise GMRInputError(f"key {k!r} appears twice in one JSON object; keep one")
+        out[k] = v
+    return out
+
+
 def load_model(path) -> GlobalModel:
-    """Read a "gmr-model/1" JSON file; a malformed file raises `GMRInputError`."""
+    """Read a "gmr-model/1" model.
+
+    **Arguments:** `path`: a path (str or `os.PathLike`) to the JSON file written by
+    `save_model` / `gmr fit`, or a dict already in that format (an in-memory model, e.g. the
+    parsed JSON; read with `model_from_dict`).
+
+    Anything else, a missing file, a directory, a binary file (an NPZ recording given as the
+    model, say), invalid JSON, a key that appears twice, or any malformed key or term raises
+    `GMRInputError` naming it and the fix.
+    """
+    if isinstance(path, dict):
+        return model_from_dict(path, "model dict")
+    if not isinstance(path, (str, os.PathLike)):
+        raise GMRInputError(f"load_model needs the path of a {FORMAT} .json file or a {FORMAT} dict, got "
+                            f"{type(path).__name__}")
     p = Path(path)
     if not p.exists():
         raise GMRInputError(f"{p}: no such model file")
+    if p.is_dir():
+        raise GMRInputError(f"{p}: is a directory, not a model file; give the .json model inside it")
     try:
-        d = json.loads(p.read_text())
+        raw = p.read_bytes()
+    except OSError as e:
+        raise GMRInputError(f"{p}: cannot read the model file ({e.strerror})") from None
+    if not raw.strip():
+        raise GMRInputError(f"{p}: the model file is empty; write it with gmr fit or save_model")
+    try:
+        text = raw.decode("utf-8-sig")  # a byte-order mark (Windows editors) is not an error
+    except UnicodeDecodeError:
+        kind = "a zip/NPZ archive (a recording?)" if raw[:2] == b"PK" else "binary data"
+        raise GMRInputError(f"{p}: not a JSON text file but {kind}; give the {FORMAT} .json model "
+                            f"written by gmr fit or save_model") from None
+    try:
+        d = json.loads(text, object_pairs_hook=_no_duplicate_keys)
     except json.JSONDecodeError as e:
         raise GMRInputError(f"{p}: not valid JSON ({e.msg} at line {e.lineno})") from None
+    except GMRInputError as e:
+        raise GMRInputError(f"{p}: {e}") from None
+    except RecursionError:
+        raise GMRInputError(f"{p}: JSON nested too deeply to be a {FORMAT} model") from None
     return model_from_dict(d, str(p))

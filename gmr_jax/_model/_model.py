@@ -2,6 +2,8 @@
 
 import abc
 import dataclasses
+import math
+import numbers
 
 import equinox as eqx
 import jax
@@ -9,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._errors import GMRInputError, as_whole_number, describe
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, signed_power, term_name
 from .._topology import AbstractTopology, Independent, as_topology
 
@@ -132,23 +135,136 @@ class GlobalModel(AbstractMechanicalModel):
         return "\n".join(self.equations())
 
 
+KNOWN_PHYSICS = (STIFFNESS, VELOCITY_DAMPING, POSITION_DAMPING)
+TERM_KEYS = ("dof", "physics", "order", "coefficient", "stderr")
+_TERM_FIX = ('a term is {"dof": i, "physics": "stiffness" | "velocity_damping" | "position_damping", '
+             '"order": k, "coefficient": c} (optional "stderr": s)')
+
+
+def check_masses(masses, source: str = "from_terms") -> np.ndarray:
+    """The masses as a float (dof,) array, or `GMRInputError`: one finite positive number per
+    DOF (a bare number is one DOF)."""
+    bad = GMRInputError(f"{source}: 'masses' must be a non-empty list of numbers, one per DOF, "
+                        f"got {describe(masses)}")
+    if isinstance(masses, (list, tuple)) and any(isinstance(m, (bool, np.bool_)) for m in masses):
+        raise bad
+    try:
+        m = np.asarray(masses)
+    except Exception:  # noqa: BLE001 - ragged or not array-like
+        raise bad from None
+    if m.dtype.kind not in "iuf":
+        raise bad
+    m = m.astype(np.float64).reshape(-1) if m.ndim == 0 else m.astype(np.float64)
+    if m.ndim != 1 or m.size == 0:
+        raise GMRInputError(f"{source}: 'masses' must be a flat list, one number per DOF, got shape {m.shape}")
+    if not np.all(np.isfinite(m)) or np.any(m <= 0):
+        raise GMRInputError(f"{source}: masses must be finite and positive, got {m.tolist()}")
+    return m
+
+
+#: highest power a model term may have (a polynomial of higher degree is not a physical law
+#: one can evaluate in float64 over any useful range)
+MAX_ORDER = 64
+
+
+def check_terms(terms, n_dof: int, source: str = "from_terms", duplicates: str = "error") -> list[dict]:
+    """Validate "gmr-model/1" term dicts for a model of `n_dof` DOFs; return normalised copies
+    (int dof and order, float coefficient and stderr). Raises `GMRInputError` naming the term,
+    the key and the fix: unknown or missing keys, a non-integer dof or order, a coefficient that
+    is not a finite number, a duplicated (dof, physics, order) unless `duplicates="add"`, a DOF
+    without any term."""
+    if duplicates not in ("error", "add"):
+        raise GMRInputError(f"{source}: duplicates must be 'error' or 'add', got {describe(duplicates)}")
+    if not isinstance(terms, (list, tuple)):
+        raise GMRInputError(f"{source}: 'terms' must be a list of term dicts, got {type(terms).__name__}; "
+                            f"{_TERM_FIX}")
+    if not terms:
+        raise GMRInputError(f"{source}: the model has no terms; give each DOF at least its stiffness, "
+                            f"{_TERM_FIX}")
+    out, seen = [], {}
+    for i, t in enumerate(terms):
+        where = f"{source}: term {i}"
+        if not isinstance(t, dict):
+            raise GMRInputError(f"{where} is {describe(t)}, not a dict; {_TERM_FIX}")
+        unknown = [k for k in t if k not in TERM_KEYS]
+        if unknown:
+            raise GMRInputError(f"{where} has unknown key(s) {unknown}; allowed: {', '.join(TERM_KEYS)}")
+        missing = [k for k in TERM_KEYS[:4] if k not in t]
+        if missing:
+            raise GMRInputError(f"{where} lacks {', '.join(repr(k) for k in missing)}; {_TERM_FIX}")
+        phys = t["physics"]
+        if not isinstance(phys, str) or phys not in KNOWN_PHYSICS:
+            raise GMRInputError(f"{where}: unknown physics {describe(phys)}; known: {', '.join(KNOWN_PHYSICS)}")
+        dof = as_whole_number(t["dof"], f"{where}: 'dof'", accept_float=True,
+                              fix=f"DOFs are numbered 0..{n_dof - 1}")
+        if not 0 <= dof < n_dof:
+            raise GMRInputError(f"{where} names dof {dof}, outside 0..{n_dof - 1} (the model has {n_dof} "
+                                f"mass(es)); give one mass per DOF or fix the term's dof")
+        order = as_whole_number(t["order"], f"{where}: 'order'", lo=0, hi=MAX_ORDER, accept_float=True,
+                                fix=f"the order is the integer power k of x^k, sgn(v)|v|^k or x^k v, "
+                                f"at most {MAX_ORDER}")
+        c = t["coefficient"]
+        if isinstance(c, bool) or not isinstance(c, numbers.Real) or not math.isfinite(c):
+            raise GMRInputError(f"{where}: 'coefficient' must be a finite number, got {describe(c)}; "
+                                f"write the value of the term's coefficient (e.g. -2244.0)")
+        term = {"dof": dof, "physics": phys, "order": order, "coefficient": float(c)}
+        if "stderr" in t:
+            s = t["stderr"]
+            if isinstance(s, bool) or not isinstance(s, numbers.Real) or not math.isfinite(s) or s < 0:
+                raise GMRInputError(f"{where}: 'stderr' must be a finite number >= 0, got {describe(s)}; "
+                                    f"omit the key when the standard error is unknown")
+            term["stderr"] = float(s)
+        key = (dof, phys, order)
+        if key in seen and duplicates == "error":
+            raise GMRInputError(f"{source}: terms {seen[key]} and {i} are both dof {dof} {phys} order {order}; "
+                                f"merge them into one term (sum their coefficients) or fix the dof/order")
+        seen.setdefault(key, i)
+        out.append(term)
+    empty = sorted(set(range(n_dof)) - {t["dof"] for t in out})
+    if empty:
+        raise GMRInputError(f"{source}: DOF(s) {empty} have no term (no restoring or damping force); add at "
+                            f"least a stiffness term for each, or remove their masses")
+    return out
+
+
 def from_terms(
-    masses, terms: list[dict], topology: str = "independent", *, min_orders: dict | None = None
+    masses, terms: list[dict], topology: str = "independent", *, min_orders: dict | None = None,
+    duplicates: str = "error",
 ) -> GlobalModel:
-    """Build a `GlobalModel` from "gmr-model/1" term dicts (coefficients of repeated terms add)."""
-    masses = np.asarray(masses, dtype=np.float64).reshape(-1)
+    """Build a `GlobalModel` from "gmr-model/1" term dicts.
+
+    **Arguments:**
+
+    - `masses`: one positive mass per DOF.
+    - `terms`: `{"dof": i, "physics": p, "order": k, "coefficient": c}` (optional `"stderr"`),
+      `p` one of "stiffness", "velocity_damping", "position_damping"; every DOF needs a term.
+    - `topology`: "independent" | "chain" (or a topology object).
+    - `min_orders`: smallest number of columns per physics (`{"stiffness": 4}`).
+    - `duplicates`: "error" (default): two terms with the same (dof, physics, order) are
+      refused; "add": their coefficients add (used to apply corrections to a model).
+
+    Raises `GMRInputError` naming the bad term and key (see `check_terms`).
+    """
+    masses = check_masses(masses)
     d = masses.shape[0]
-    min_orders = min_orders or {}
+    topology = as_topology(topology)
+    terms = check_terms(terms, d, duplicates=duplicates)
+    min_orders = {} if min_orders is None else min_orders
+    if not isinstance(min_orders, dict) or any(k not in KNOWN_PHYSICS for k in min_orders):
+        raise GMRInputError(f"from_terms: min_orders must be a dict keyed by {KNOWN_PHYSICS}, got "
+                            f"{describe(min_orders)}")
+    for k, v in min_orders.items():
+        as_whole_number(v, f"from_terms: min_orders[{k!r}]", lo=1)
     arrays, errs = {}, {}
-    for name in (STIFFNESS, VELOCITY_DAMPING, POSITION_DAMPING):
-        orders = [int(t["order"]) for t in terms if t["physics"] == name]
+    for name in KNOWN_PHYSICS:
+        orders = [t["order"] for t in terms if t["physics"] == name]
         size = max([o + 1 for o in orders] + [min_orders.get(name, 1)])
         arrays[name] = np.zeros((d, size))
         errs[name] = np.full((d, size), np.nan)
     for t in terms:
-        arrays[t["physics"]][int(t["dof"]), int(t["order"])] += float(t["coefficient"])
+        arrays[t["physics"]][t["dof"], t["order"]] += t["coefficient"]
         if "stderr" in t:
-            errs[t["physics"]][int(t["dof"]), int(t["order"])] = float(t["stderr"])
+            errs[t["physics"]][t["dof"], t["order"]] = t["stderr"]
     has_err = any("stderr" in t for t in terms)
     return GlobalModel(
         masses=jnp.asarray(masses),

@@ -1,12 +1,14 @@
 """Recordings: one experiment or simulation run, in the NPZ/CSV format of the contracts."""
 
 import csv
+import io
+import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from .._errors import GMRInputError
+from .._errors import GMRInputError, describe, is_tracer
 from .._topology import as_topology
 from ._derivatives import differentiate
 
@@ -18,6 +20,11 @@ class Recording:
     """One run. `t` (N,), `x` (N, D) displacements (cell deformations for a chain, base cell
     first); optional `v`, `a` (absolute accelerations of the masses), inputs `base_acc` (N,) or
     `force` (N, D), optional `masses` (D,). `derived` lists the signals estimated, not measured.
+
+    Construction checks types and shapes (float arrays, not integer, boolean or object ones;
+    one length N; D columns in x, v, a, force; D masses; a 1-D x, v, a or force is one DOF)
+    and raises `GMRInputError`; values (NaN, sampling, length) are checked by `validate`, which
+    every fit, refinement and discovery runs.
     """
 
     t: np.ndarray
@@ -30,6 +37,27 @@ class Recording:
     name: str = "recording"
     derived: tuple = field(default_factory=tuple)
 
+    def __post_init__(self):
+        _check_fields(self)
+        for key in ("x", "v", "a", "force"):  # one DOF may be given as (N,)
+            val = getattr(self, key)
+            if val is not None and np.ndim(val) == 1:
+                object.__setattr__(self, key, val[:, None])
+        if self.base_acc is not None and np.ndim(self.base_acc) == 2:  # (N, 1)
+            object.__setattr__(self, "base_acc", self.base_acc[:, 0])
+        if self.masses is not None and np.ndim(self.masses) == 0:  # one DOF
+            object.__setattr__(self, "masses", np.reshape(np.asarray(self.masses), (1,)))
+        d = np.shape(self.x)[1]
+        if d == 0:
+            raise GMRInputError(f"{self.name}: 'x' has no columns; give one displacement column per DOF")
+        for key in ("v", "a", "force"):
+            val = getattr(self, key)
+            if val is not None and np.shape(val)[1] != d:
+                raise GMRInputError(f"{self.name}: '{key}' has {np.shape(val)[1]} columns but 'x' has {d} DOFs")
+        if self.masses is not None and np.shape(self.masses)[0] != d:
+            raise GMRInputError(f"{self.name}: 'masses' has {np.shape(self.masses)[0]} entries but 'x' has {d} "
+                                f"DOFs; give one mass per DOF")
+
     @property
     def n_samples(self) -> int:
         return self.t.shape[0]
@@ -40,6 +68,9 @@ class Recording:
 
     @property
     def dt(self) -> float:
+        if self.t.shape[0] < 2:
+            raise GMRInputError(f"{self.name}: 't' has {self.t.shape[0]} sample(s): no sampling step; "
+                                f"record at least {MIN_SAMPLES} samples")
         return float(self.t[1] - self.t[0])
 
     def inputs(self):
@@ -65,6 +96,63 @@ class Recording:
 
     def save(self, path) -> None:
         save_recording(self, path)
+
+
+SIGNALS = ("t", "x", "v", "a", "base_acc", "force", "masses")
+_DERIVABLE = ("v", "a")
+
+
+def _check_dtype(name, arr, src):
+    """A numeric, real, non-boolean array or `GMRInputError` naming the signal and the fix."""
+    kind = arr.dtype.kind
+    if kind == "f":
+        return
+    what = {"b": "boolean", "i": "integer", "u": "integer", "c": "complex", "O": "object (Python)",
+            "U": "text", "S": "bytes", "M": "datetime", "m": "timedelta"}.get(kind, f"dtype {arr.dtype}")
+    fix = ("convert it with .astype(float) (in the units of the contracts: s, m, m/s, m/s², N, kg)"
+           if kind in "biu" else "store plain float arrays")
+    raise GMRInputError(f"{src}: '{name}' holds {what} values ({arr.dtype}), not floats; {fix}")
+
+
+def _check_fields(rec: "Recording") -> None:
+    """Types, dtypes and shapes of a `Recording`'s fields (values are checked by `validate`)."""
+    src = rec.name if isinstance(rec.name, str) else "recording"
+    if not isinstance(rec.name, str):
+        raise GMRInputError(f"Recording: name must be a string, got {describe(rec.name)}")
+    if not isinstance(rec.derived, tuple) or any(d not in _DERIVABLE for d in rec.derived):
+        raise GMRInputError(f"{src}: derived must be a tuple of {_DERIVABLE}, got {describe(rec.derived)}")
+    n = None
+    for key in SIGNALS:
+        val = getattr(rec, key)
+        if val is None:
+            if key in ("t", "x"):
+                raise GMRInputError(f"{src}: '{key}' is required (Recording(t=..., x=...))")
+            continue
+        if is_tracer(val):
+            continue
+        if isinstance(val, (str, bytes, dict)):
+            raise GMRInputError(f"{src}: '{key}' must be an array of numbers, got {type(val).__name__}")
+        try:
+            arr = np.asarray(val)
+        except Exception:  # noqa: BLE001 - ragged lists and the like
+            raise GMRInputError(f"{src}: '{key}' is not a rectangular array of numbers") from None
+        _check_dtype(key, arr, src)
+        if key == "t":
+            if arr.ndim != 1:
+                raise GMRInputError(f"{src}: 't' must be 1-D (N,), got shape {arr.shape}")
+            n = arr.shape[0]
+        elif key == "base_acc":
+            if not (arr.ndim == 1 or (arr.ndim == 2 and arr.shape[1] == 1)):
+                raise GMRInputError(f"{src}: 'base_acc' must be 1-D (N,), one value per sample, got shape "
+                                    f"{arr.shape}")
+        elif key == "masses":
+            if arr.ndim > 1:
+                raise GMRInputError(f"{src}: 'masses' must be 1-D (D,), one per DOF, got shape {arr.shape}")
+        elif arr.ndim not in (1, 2):
+            raise GMRInputError(f"{src}: '{key}' has shape {arr.shape}, expected (N, D) or (N,)")
+        if key != "masses" and n is not None and arr.shape[0] != n:
+            raise GMRInputError(f"{src}: '{key}' has shape {arr.shape}, expected {n} samples to match 't' "
+                                f"({n} samples)")
 
 
 def _as2d(name, arr, n, src):
@@ -121,6 +209,12 @@ def validate(rec: Recording, src: str = "recording", min_samples: int = MIN_SAMP
                 f"{src}: '{key}' has {int(bad.sum())} NaN/inf value(s), first at sample {int(idx[0])}; "
                 f"remove or interpolate them before fitting"
             )
+    for k in range(x.shape[1]):
+        if x.shape[0] and np.ptp(x[:, k]) == 0:
+            raise GMRInputError(
+                f"{src}: x of column {k} is constant ({x[0, k]:g} throughout): nothing to fit; "
+                f"check that sensor's column or drop that DOF"
+            )
     dt = np.diff(t)
     if np.any(dt <= 0):
         i = int(np.argmax(dt <= 0))
@@ -153,41 +247,127 @@ def save_recording(rec: Recording, path) -> None:
     np.savez(path, **data)
 
 
+def _read_csv(path: Path, src: str) -> Recording:
+    try:
+        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark (Windows editors) is not a column
+    except UnicodeDecodeError:
+        raise GMRInputError(f"{src}: not a text CSV file (binary data); save CSV text with a header row "
+                            f"t, x0, ... or use an .npz file") from None
+    lines = text.splitlines()
+    if not lines or not lines[0].strip():
+        raise GMRInputError(f"{src}: the first line must be the header row naming the columns (t, x0, ...)")
+    header = [h.strip() for h in next(csv.reader([lines[0]]))]
+    expected = "t, x0.. (one per DOF), optional v0.., a0.., f0.., base_acc"
+
+    def known(h):
+        if h in ("t", "base_acc"):
+            return True
+        return any(h.startswith(p) and h[len(p):].isdigit() for p in ("x", "v", "a", "f"))
+
+    unknown = [h for h in header if not known(h)]
+    if unknown or "t" not in header or "x0" not in header:
+        what = f"unknown column(s) {unknown}" if unknown else "missing column 't' or 'x0'"
+        raise GMRInputError(f"{src}: {what}; found columns {header}, expected {expected} "
+                            f"(the first line must be this header)")
+    dup = sorted({h for h in header if header.count(h) > 1})
+    if dup:
+        raise GMRInputError(f"{src}: column(s) {dup} appear more than once in the header; keep one of each")
+    rows = [(i + 1, r) for i, r in enumerate(lines) if i > 0 and r.strip()]
+    if not rows:
+        raise GMRInputError(f"{src}: the header is there but no data rows follow")
+    ncol = len(header)
+    try:  # fast path; on any failure the scan below names the row and column
+        data = np.loadtxt(io.StringIO("\n".join(r for _, r in rows)), delimiter=",", comments=None, ndmin=2)
+        ok = data.shape == (len(rows), ncol)
+    except ValueError:
+        ok = False
+    for j, (line_no, line) in enumerate([] if ok else rows):
+        if j == 0:
+            data = np.empty((len(rows), ncol))
+        cells = line.split(",")
+        if len(cells) != ncol:
+            raise GMRInputError(f"{src}: line {line_no} (sample {j}) has {len(cells)} cells, the header has "
+                                f"{ncol} columns; every row needs one value per column")
+        for c, cell in enumerate(cells):
+            try:
+                data[j, c] = float(cell)
+            except ValueError:
+                raise GMRInputError(f"{src}: line {line_no} (sample {j}), column '{header[c]}': {cell.strip()!r} "
+                                    f"is not a number; fix or remove that row") from None
+    col = {h: data[:, i] for i, h in enumerate(header)}
+
+    def group(pre):
+        idx = sorted(int(h[len(pre):]) for h in header if h.startswith(pre) and h[len(pre):].isdigit())
+        if not idx:
+            return None
+        if idx != list(range(len(idx))):
+            missing = sorted(set(range(max(idx) + 1)) - set(idx))
+            raise GMRInputError(f"{src}: columns {pre}0.. must be numbered 0, 1, 2, ... without gaps; "
+                                f"{', '.join(pre + str(i) for i in missing)} missing")
+        return np.stack([col[f"{pre}{i}"] for i in idx], axis=1)
+
+    return Recording(t=col["t"], x=group("x"), v=group("v"), a=group("a"),
+                     base_acc=col.get("base_acc"), force=group("f"), name=path.stem)
+
+
+def _read_npz(path: Path, src: str) -> Recording:
+    fix = "save it with np.savez(path, t=t, x=x, ...) or gmr_jax.save_recording"
+    try:
+        z = np.load(path, allow_pickle=False)
+    except Exception as e:  # noqa: BLE001 - any unreadable file is a user error here
+        raise GMRInputError(f"{src}: cannot read as NPZ ({type(e).__name__}); recordings are .npz "
+                            f"(np.savez) or .csv files; {fix}") from None
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        raise GMRInputError(f"{src}: holds a single array (.npy), not named arrays; {fix}")
+    with z:
+        found = sorted(z.files)
+        unknown = [k for k in found if k not in SIGNALS]
+        if unknown or "t" not in found or "x" not in found:
+            what = f"unknown array(s) {unknown}" if unknown else "missing 't' or 'x'"
+            raise GMRInputError(f"{src}: NPZ needs arrays 't' and 'x' (optional v, a, base_acc, force, masses); "
+                                f"{what}; found {found}")
+        arrays = {}
+        for k in found:  # np.load is lazy: every read happens here, inside the check
+            try:
+                arrays[k] = np.asarray(z[k])
+            except ValueError:
+                raise GMRInputError(f"{src}: '{k}' is an object array (pickled Python objects), which is not "
+                                    f"loaded; store it as a float array, {fix}") from None
+            except Exception as e:  # noqa: BLE001 - a damaged member
+                raise GMRInputError(f"{src}: cannot read array '{k}' ({type(e).__name__}); {fix}") from None
+    return Recording(**arrays, name=path.stem)
+
+
 def load_recording(path) -> Recording:
     """Read and validate a recording (NPZ with keys t, x, [v, a, base_acc, force, masses], or
-    CSV with a header row t, x0.., v0.., a0.., base_acc or f0..)."""
+    CSV with a header row t, x0.., v0.., a0.., base_acc or f0..).
+
+    `path` is a str or `os.PathLike`. Anything else, a missing or empty file, a directory, an
+    unreadable or object (pickled) array, an unknown or missing key/column, a non-numeric cell,
+    an integer or boolean array, too few samples, NaN/inf, non-uniform time or a constant
+    displacement column raises `GMRInputError` naming it and the fix."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise GMRInputError(f"load_recording needs the path of an .npz or .csv file, got {type(path).__name__}; "
+                            f"for arrays in memory build gmr_jax.Recording(t=..., x=...)")
     path = Path(path)
     src = str(path)
     if not path.exists():
         raise GMRInputError(f"{src}: no such file")
-    if path.suffix.lower() == ".csv":
-        try:
-            with open(path) as fh:
-                header = next(csv.reader(fh))
-            data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
-        except (StopIteration, ValueError) as e:
-            raise GMRInputError(f"{src}: cannot read as CSV with a header row ({e})") from None
-        header = [h.strip() for h in header]
-        if data.shape[1] != len(header):
-            raise GMRInputError(f"{src}: {len(header)} header names but {data.shape[1]} columns")
-        col = {h: data[:, i] for i, h in enumerate(header)}
-
-        def group(pre):
-            keys = sorted((h for h in header if h.startswith(pre) and h[len(pre):].isdigit()),
-                          key=lambda h: int(h[len(pre):]))
-            return np.stack([col[k] for k in keys], axis=1) if keys else None
-
-        if "t" not in col or group("x") is None:
-            raise GMRInputError(f"{src}: CSV needs columns 't' and 'x0' (and x1.. for more DOFs)")
-        rec = Recording(t=col["t"], x=group("x"), v=group("v"), a=group("a"),
-                        base_acc=col.get("base_acc"), force=group("f"), name=path.stem)
-    else:
-        try:
-            z = np.load(path, allow_pickle=False)
-        except Exception as e:  # noqa: BLE001 - any unreadable file is a user error here
-            raise GMRInputError(f"{src}: cannot read as NPZ ({type(e).__name__})") from None
-        if "t" not in z or "x" not in z:
-            raise GMRInputError(f"{src}: NPZ needs arrays 't' and 'x'; found {sorted(z.files)}")
-        rec = Recording(**{k: z[k] for k in ("t", "x", "v", "a", "base_acc", "force", "masses") if k in z},
-                        name=path.stem)
+    if path.is_dir():
+        raise GMRInputError(f"{src}: is a directory; give the .npz or .csv recording inside it")
+    try:
+        empty = path.stat().st_size == 0
+    except OSError as e:
+        raise GMRInputError(f"{src}: cannot read ({e.strerror})") from None
+    if empty:
+        raise GMRInputError(f"{src}: the file is empty (0 bytes)")
+    try:
+        rec = _read_csv(path, src) if path.suffix.lower() == ".csv" else _read_npz(path, src)
+    except OSError as e:
+        raise GMRInputError(f"{src}: cannot read ({e.strerror or type(e).__name__})") from None
+    except GMRInputError as e:  # the Recording's own checks name it by its stem: use the path
+        msg = str(e)
+        if msg.startswith(f"{path.stem}: "):
+            msg = msg[len(path.stem) + 2:]
+        raise GMRInputError(msg if msg.startswith(src) else f"{src}: {msg}") from None
     return validate(rec, src)

@@ -3,8 +3,10 @@
 import diffrax as dfx
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .._errors import GMRInputError, check_real, describe, is_tracer
 from .._model._model import AbstractMechanicalModel
 from .._solution import RESULTS, Solution, error_if_failed
 from ._inputs import AbstractInput
@@ -14,7 +16,6 @@ from ._integrate import Integrator, integrate, vector_field
 DEFAULT_BOX = 1e6
 
 
-@eqx.filter_jit
 def simulate(
     model: AbstractMechanicalModel,
     inputs: AbstractInput,
@@ -41,7 +42,79 @@ def simulate(
 
     **Returns:** a `Solution` with `value = (x (times, dof), v (times, dof))`, `result` (a
     failed or diverged solve is flagged, its values NaN), `stats` with the step counts.
+
+    A wrong argument (x0 or v0 not one finite value per DOF, ts not strictly increasing or with
+    fewer than 2 times, an unknown model or input type) raises `GMRInputError` before any work;
+    values are checked only when concrete, so `simulate` stays usable under jit/vmap/grad.
     """
+    _check_inputs(model, inputs, ts, x0, v0, integrator, box)
+    return _simulate(model, inputs, ts, x0, v0, integrator, box=box, throw=throw)
+
+
+def _check_inputs(model, inputs, ts, x0, v0, integrator, box):
+    """`GMRInputError` for a wrong argument of `simulate`. Shapes are checked always (they are
+    static under jit/vmap); values only when concrete (never on a tracer)."""
+    if not isinstance(model, AbstractMechanicalModel):
+        raise GMRInputError(f"simulate: model must be a mechanical model (GlobalModel, a system's truth, "
+                            f"...), got {type(model).__name__}; load one with gmr_jax.load_model")
+    if not isinstance(inputs, AbstractInput):
+        raise GMRInputError(f"simulate: inputs must be an input object (NoInput(), BaseSine, HalfSineTip, "
+                            f"Sampled, ...), got {type(inputs).__name__}")
+    if not isinstance(integrator, Integrator):
+        raise GMRInputError(f"simulate: integrator must be a gmr_jax.Integrator, got {type(integrator).__name__}")
+    d = model.n_dof
+    if not is_tracer(ts):
+        _check_array_type(ts, "ts")
+    if jnp.ndim(ts) != 1 or jnp.shape(ts)[0] < 2:
+        raise GMRInputError(f"simulate: ts must be a 1-D array of at least 2 save times (the first is the "
+                            f"start), got shape {jnp.shape(ts)}; e.g. jnp.linspace(0, 1, 101)")
+    if not is_tracer(ts):
+        t = np.asarray(ts, float)
+        if not np.all(np.isfinite(t)):
+            raise GMRInputError(f"simulate: ts has NaN/inf, first at index {int(np.argmax(~np.isfinite(t)))}")
+        dt = np.diff(t)
+        if np.any(dt <= 0):
+            i = int(np.argmax(dt <= 0)) + 1
+            raise GMRInputError(f"simulate: ts must be strictly increasing; ts[{i}] = {t[i]:g} <= ts[{i - 1}] = "
+                                f"{t[i - 1]:g}; sort it and drop repeated times")
+    for name, val in (("x0", x0), ("v0", v0)):
+        if val is None:
+            continue
+        if not is_tracer(val):
+            _check_array_type(val, name)
+        if jnp.shape(val) != (d,):
+            raise GMRInputError(f"simulate: {name} must hold {d} value(s), one per DOF of this {d}-DOF model, "
+                                f"got shape {jnp.shape(val)}")
+        if not is_tracer(val) and not np.all(np.isfinite(np.asarray(val, float))):
+            raise GMRInputError(f"simulate: {name} has NaN/inf values {np.asarray(val).tolist()}; give finite "
+                                f"initial {'displacements' if name == 'x0' else 'velocities'}")
+    if isinstance(box, tuple):
+        if len(box) != 2:
+            raise GMRInputError(f"simulate: box must be a number b or a (lo, hi) pair, got a {len(box)}-tuple")
+        lo, hi = box
+        if not (is_tracer(lo) or is_tracer(hi)):
+            check_real(lo, "simulate: box lo")
+            check_real(hi, "simulate: box hi")
+            if np.any(np.asarray(lo, float) >= np.asarray(hi, float)):
+                raise GMRInputError("simulate: box (lo, hi) needs lo < hi for every DOF")
+    else:
+        check_real(box, "simulate: box", lo=0.0, lo_open=True,
+                   fix="give the largest |x| allowed before the solve counts as diverged, e.g. 1e6")
+
+
+def _check_array_type(val, name):
+    if isinstance(val, (bool, str, bytes)):
+        raise GMRInputError(f"simulate: {name} must be an array of numbers, got {describe(val)}")
+    try:
+        kind = np.asarray(val).dtype.kind
+    except Exception:  # noqa: BLE001 - ragged or not array-like
+        kind = "O"
+    if kind not in "iuf":
+        raise GMRInputError(f"simulate: {name} must be an array of real numbers, got {describe(val)}")
+
+
+@eqx.filter_jit
+def _simulate(model, inputs, ts, x0, v0, integrator, *, box, throw):
     x0 = jnp.asarray(x0, float)
     v0 = jnp.zeros_like(x0) if v0 is None else jnp.asarray(v0, float)
     lo, hi = (-box, box) if not isinstance(box, tuple) else box
