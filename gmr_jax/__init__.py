@@ -15,6 +15,7 @@ from . import _config as _config  # noqa: F401  (enables x64 first)
 # results and errors
 from ._config import use_cpu_cores as use_cpu_cores
 from ._errors import GMRInputError as GMRInputError
+from ._reconstruct._sanity import GMRDataWarning as GMRDataWarning
 from ._solution import GMRComputationError as GMRComputationError, RESULTS as RESULTS, Solution as Solution
 from ._topology import AbstractTopology as AbstractTopology, Chain as Chain, Independent as Independent
 

@@ -1,8 +1,17 @@
-"""`gmr fit REC [REC ...] --out MODEL.json`: reconstruct a global model (contracts, "Fit")."""
+"""`gmr fit REC [REC ...] --out MODEL.json`: reconstruct a global model (contracts, "Fit").
+
+Physical sanity checks (`gmr_jax._reconstruct._sanity`) run on the data and the model: a
+refusal is an input error (exit 2); a warning is printed to stderr as a `warning: ...` line and
+recorded in the model file under "warnings", and the exit status stays 0 (3 with --strict).
+"""
+
+import sys
+import warnings
 
 import numpy as np
 
 from .._errors import GMRInputError
+from .._reconstruct._sanity import GMRDataWarning
 from ._args import positive_int
 
 
@@ -19,6 +28,9 @@ def register(sub):
     f.add_argument("--masses", default=None, help="comma-separated masses (default: from recordings, else 1)")
     f.add_argument("--no-velocity-damping", action="store_true")
     f.add_argument("--no-position-damping", action="store_true")
+    f.add_argument("--strict", action="store_true",
+                   help="exit with status 3 when a sanity check warns about the data or the model (the model and "
+                   "its warnings are still written); without it warnings are printed and the status is 0")
     f.set_defaults(fn=run)
     return f
 
@@ -46,10 +58,13 @@ def run(args) -> int:
         except ValueError:
             raise GMRInputError(f"--masses must be comma-separated numbers, got {args.masses!r}") from None
     fn = gmr.gmc_sindy if args.method == "gmc-sindy" else gmr.reconstruct
-    sol = fn(recs, lib, topology=args.topology, masses=masses, **kwargs)
+    with warnings.catch_warnings():  # printed below as `warning:` lines, once each
+        warnings.simplefilter("ignore", GMRDataWarning)
+        sol = fn(recs, lib, topology=args.topology, masses=masses, **kwargs)
     model, st = sol.value, sol.stats
     gmr.save_model(model, args.out, method=st["method"],
-                   library={"r": lib.restoring_order, "d": lib.damping_order}, training=st["training"])
+                   library={"r": lib.restoring_order, "d": lib.damping_order}, training=st["training"],
+                   warnings=list(st["warnings"]))
     print(f"{st['method']} model from {len(recs)} recording(s) -> {args.out}")
     for line in model.equations():
         print("  " + line)
@@ -59,8 +74,12 @@ def run(args) -> int:
                   f"K_r={rep.stats['K_r']}, K_d={rep.stats['K_d']}")
     for name, sc in st["training"].items():
         print(f"  training {name}: R2 {np.round(sc['r2'], 5).tolist()}, NRMSE {np.round(sc['nrmse'], 5).tolist()}")
-    for w in st["warnings"]:
-        print(f"  warning: {w}")
     if any(r.v is None or r.a is None for r in recs):
         print("  note: velocities/accelerations were estimated from x (Savitzky-Golay, see README)")
+    for w in st["warnings"]:
+        print(f"warning: {w}", file=sys.stderr)
+    if st["warnings"] and args.strict:
+        print(f"gmr fit: {len(st['warnings'])} warning(s) with --strict: exit status 3 (model written to "
+              f"{args.out})", file=sys.stderr)
+        return 3
     return 0

@@ -1,5 +1,6 @@
 """The end-to-end reconstruction of Algorithm 1 on recordings, and the GMC-SINDy baseline."""
 
+import warnings as _warnings
 from dataclasses import dataclass, field
 
 import equinox as eqx
@@ -7,16 +8,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import GMRInputError
-from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._coordination._coordinate import coordinate, split_flat
+from .._errors import GMRInputError
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, Library
 from .._fit._local_fit import AutoThreshold, LocalFit, fit_local
 from .._fit._stls import STLS, compress, stls_qr
 from .._fit._threshold import default_thresholds, select_threshold
 from .._model._model import GlobalModel
 from .._recordings._recording import Recording, validate
+from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
+from . import _sanity
+from ._sanity import GMRDataWarning
 
 #: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
 DEFAULT_SOLVER = STLS(threshold=0.1, alpha=0.0, normalize_columns=True, unbias=True)
@@ -32,6 +35,9 @@ def regression_targets(rec: Recording, masses: np.ndarray, topology) -> np.ndarr
 
 
 def _resolve(recordings, masses, topology, min_recordings=2, what="fit"):
+    """Validate the recordings, settle topology and masses, fill missing v/a; also run the
+    checks on the raw data (`_sanity`: masses, clipping, missing input). Returns the completed
+    recordings, the masses, the topology and the data warnings."""
     if len(recordings) == 0:
         raise GMRInputError("no recordings given: pass one recording per equilibrium")
     recs = [validate(r, r.name) for r in recordings]
@@ -41,18 +47,62 @@ def _resolve(recordings, masses, topology, min_recordings=2, what="fit"):
             raise GMRInputError(f"{r.name}: has {r.n_dof} DOFs but {recs[0].name} has {d}")
     topology = as_topology(("chain" if d > 1 else "independent") if topology is None else topology)
     if masses is None:
+        _sanity.check_masses([r.name for r in recs], [r.masses for r in recs])
         found = [r.masses for r in recs if r.masses is not None]
         masses = found[0] if found else np.ones(d)
     masses = np.asarray(masses, float).reshape(-1)
     if masses.shape[0] != d or np.any(masses <= 0) or not np.all(np.isfinite(masses)):
         raise GMRInputError(f"masses must be {d} positive numbers, got {masses.tolist()}")
-    recs = [r.complete(topology) for r in recs]
     if len(recs) < min_recordings:
         raise GMRInputError(
             f"only {len(recs)} recording(s): the coordination needs small-vibration recordings "
             f"around at least two distinct equilibria (one file per equilibrium)"
         )
-    return recs, masses, topology
+    warnings = []
+    for r in recs:
+        warnings += _sanity.check_clipping(r.name, _measured_columns(r))
+        warnings += _sanity.check_missing_input(r.name, r.x, r.base_acc is not None or r.force is not None)
+    recs = [r.complete(topology) for r in recs]
+    return recs, masses, topology, warnings
+
+
+def _measured_columns(rec: Recording) -> dict:
+    """Label -> samples of every measured (not derived) signal column of a recording."""
+    cols = {}
+    for key, pre in (("x", "x"), ("v", "v"), ("a", "a"), ("force", "f")):
+        val = getattr(rec, key)
+        if val is not None and key not in rec.derived:
+            cols |= {f"{pre}{i}": val[:, i] for i in range(val.shape[1])}
+    if rec.base_acc is not None:
+        cols["base_acc"] = rec.base_acc
+    return cols
+
+
+def _emit(warnings: list[str]) -> None:
+    for w in warnings:
+        _warnings.warn(w, GMRDataWarning, stacklevel=3)
+
+
+def _wells(recs, i: int, well_tol: float):
+    """Group the recordings of DOF `i` into wells (`group_wells`); refuse one well only, or two
+    wells that are one well recorded twice (`_sanity.check_distinct_wells`).
+
+    Returns the recording means, their well labels and, per well, the recording indices."""
+    means = np.array([r.x[:, i].mean() for r in recs])
+    spread = np.ptp(means)
+    labels = group_wells(means, well_tol * spread if spread > 0 else 0.0)
+    n_wells = labels.max() + 1
+    if n_wells < 2:
+        raise GMRInputError(
+            f"DOF {i}: all recordings are around the same equilibrium (mean x = {means.mean():.4g}); "
+            f"the coordination needs recordings around at least two distinct equilibria"
+        )
+    groups = [[k for k in range(len(recs)) if labels[k] == w] for w in range(n_wells)]
+    amps = [_sanity.vibration_amplitude(r.x[:, i]) for r in recs]
+    _sanity.check_distinct_wells(
+        i, [[recs[k].name for k in g] for g in groups],
+        [np.mean([means[k] for k in g]) for g in groups], [min(amps[k] for k in g) for g in groups])
+    return means, labels, groups
 
 
 def group_wells(means: np.ndarray, tol: float) -> np.ndarray:
@@ -249,30 +299,28 @@ def reconstruct(
     **Returns:** a `Solution` whose `value` is the `GlobalModel` (standard errors attached),
     `result` a `RESULTS` code, and `stats`: `method` ("GMR"), `library`, `dofs` (per-DOF
     `DofReport`: equilibria, local coefficients and standard errors, thresholds, global orders,
-    condition numbers), `training` (R² and NRMSE per recording and DOF), `warnings`.
+    condition numbers), `training` (R² and NRMSE per recording and DOF), `warnings` (plain-words
+    findings of the physical sanity checks, `_sanity`: clipped channels, a driven record
+    without its input, records that leave their well or are not small, poor training R²,
+    insignificant kept terms, a global law with spurious outer wells, an outward escape near
+    the data or a blow-up between the wells; each is also emitted as a `GMRDataWarning`).
 
-    User mistakes (no recordings, one equilibrium only, inconsistent shapes or masses) raise
-    `GMRInputError` before anything is computed.
+    User mistakes (no recordings, one equilibrium only, two recordings of one well, files
+    with different masses, inconsistent shapes) raise `GMRInputError` before anything is
+    computed.
     """
     failure = _Failure("reconstruct", throw)
     measured = all(r.v is not None and r.a is not None and not r.derived for r in recordings)
     if keep_restoring_order is None:
         keep_restoring_order = 3 if measured else 1
-    recs, masses, topology = _resolve(recordings, masses, topology)
+    recs, masses, topology, warnings = _resolve(recordings, masses, topology)
     d = recs[0].n_dof
+    wells = [_wells(recs, i, well_tol) for i in range(d)]  # refusals before any fit
     targets = [regression_targets(r, masses, topology) for r in recs]
     stiff, vdamp, pdamp, se_s, se_v, se_p, reports = [], [], [], [], [], [], []
+    k1 = library.terms().index((STIFFNESS, 1)) if library.restoring_order >= 1 else None
     for i in range(d):
-        means = np.array([r.x[:, i].mean() for r in recs])
-        spread = np.ptp(means)
-        labels = group_wells(means, well_tol * spread if spread > 0 else 0.0)
-        n_wells = labels.max() + 1
-        if n_wells < 2:
-            raise GMRInputError(
-                f"DOF {i}: all recordings are around the same equilibrium (mean x = {means.mean():.4g}); "
-                f"the coordination needs recordings around at least two distinct equilibria"
-            )
-        groups = [[k for k in range(len(recs)) if labels[k] == w] for w in range(n_wells)]
+        _, labels, groups = wells[i]
         xs, w = _pad_stack([[recs[k].x[:, i] for k in g] for g in groups])
         vs, _ = _pad_stack([[recs[k].v[:, i] for k in g] for g in groups])
         ys, _ = _pad_stack([[targets[k][:, i] for k in g] for g in groups])
@@ -295,15 +343,28 @@ def reconstruct(
                          f"{np.asarray(fits.equilibrium).round(6).tolist()}, condition numbers "
                          f"{float(coord.stats['cond_r']):.3g}/{float(coord.stats['cond_d']):.3g}")
         g = coord.value
+        names = [r.name for r in recs]
+        xcol = [r.x[:, i] for r in recs]
+        eq = np.asarray(fits.equilibrium)
+        coef = np.asarray(fits.coef)
+        local_se = np.sqrt(np.clip(np.diagonal(np.asarray(fits.covariance), axis1=1, axis2=2), 0, None))
+        local_k = coef[:, k1] if k1 is not None else np.full(len(groups), np.inf)
+        swing, swung = _sanity.check_swings(i, names, xcol, labels, eq, local_k)
+        warnings += swing + _sanity.check_amplitude(i, names, xcol, labels, eq, skip=swung)
+        well_names = [", ".join(names[k] for k in grp) for grp in groups]
+        warnings += _sanity.check_significance(i, well_names, library.names(), coef, local_se)
+        amps = [max(_sanity.vibration_amplitude(xcol[k]) for k in grp) for grp in groups]
+        warnings += _sanity.check_global_shape(i, np.asarray(g.stiffness), eq, amps,
+                                               local_k if k1 is not None else np.zeros(len(groups)))
         se = split_flat(jnp.sqrt(jnp.clip(jnp.diag(coord.aux), 0.0)), g)
         stiff.append(np.asarray(g.stiffness)), vdamp.append(np.asarray(g.velocity_damping))
         pdamp.append(np.asarray(g.position_damping))
         se_s.append(np.asarray(se.stiffness)), se_v.append(np.asarray(se.velocity_damping))
         se_p.append(np.asarray(se.position_damping))
         reports.append(DofReport(
-            equilibria=np.asarray(fits.equilibrium),
-            local_coef=np.asarray(fits.coef),
-            local_stderr=np.sqrt(np.clip(np.diagonal(np.asarray(fits.covariance), axis1=1, axis2=2), 0, None)),
+            equilibria=eq,
+            local_coef=coef,
+            local_stderr=local_se,
             thresholds=np.asarray(fits.threshold),
             recordings_per_well=[[recs[k].name for k in g] for g in groups],
             stats={k: np.asarray(v).tolist() for k, v in coord.stats.items()}
@@ -312,7 +373,10 @@ def reconstruct(
     stderr = {STIFFNESS: jnp.asarray(np.stack(se_s)), VELOCITY_DAMPING: jnp.asarray(np.stack(se_v)),
               POSITION_DAMPING: jnp.asarray(np.stack(se_p))}
     model = _model_from_blocks(masses, topology, stiff, vdamp, pdamp, stderr)
-    return _solution(model, failure, "GMR", library, reports, training_scores(model, recs, masses, topology), [])
+    training = training_scores(model, recs, masses, topology)
+    warnings += _sanity.check_fit_quality(training)
+    _emit(warnings)
+    return _solution(model, failure, "GMR", library, reports, training, warnings)
 
 
 def coefficients_to_blocks(coef: np.ndarray, library: Library):
@@ -342,9 +406,10 @@ def gmc_sindy(
 
     **Returns:** a `Solution` as `reconstruct`'s (`stats["method"]` "GMC-SINDy"). An STLS whose
     support was still changing at `max_iter` is kept (as pysindy does) with a warning in
-    `stats["warnings"]`; a non-finite fit is a failure (`throw`)."""
-    failure, warnings = _Failure("gmc_sindy", throw), []
-    recs, masses, topology = _resolve(recordings, masses, topology, min_recordings=1)
+    `stats["warnings"]`, beside the data checks of `reconstruct` that apply to one global fit
+    (masses, clipping, missing input, training R²); a non-finite fit is a failure (`throw`)."""
+    failure = _Failure("gmc_sindy", throw)
+    recs, masses, topology, warnings = _resolve(recordings, masses, topology, min_recordings=1)
     d = recs[0].n_dof
     targets = [regression_targets(r, masses, topology) for r in recs]
     stiff, vdamp, pdamp, reports = [], [], [], []
@@ -371,4 +436,6 @@ def gmc_sindy(
                                  stats={"result": RESULTS[sol.result]}))
     model = _model_from_blocks(masses, topology, stiff, vdamp, pdamp)
     training = training_scores(model, recs, masses, topology)
+    warnings += _sanity.check_fit_quality(training)
+    _emit(warnings)
     return _solution(model, failure, "GMC-SINDy", library, reports, training, warnings)

@@ -1,0 +1,200 @@
+"""Physical sanity checks of `reconstruct` / `gmr fit` (issue 13): each bad-data case gives its
+own plain-words warning or refusal, and clean built-in data give none.
+
+Recordings are 5 s long (one shape) and fitted with the default library, so the local fit is
+compiled once; recordings are shared per module."""
+
+import dataclasses
+import json
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gmr_jax as g
+from gmr_jax._cli._main import main
+from gmr_jax._reconstruct import _sanity
+from gmr_jax._reconstruct._sanity import GMRDataWarning
+
+DURATION = 5.0
+
+
+def _fit(recs, **kw):
+    """reconstruct, returning (solution, the GMRDataWarning messages emitted)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", GMRDataWarning)
+        sol = g.reconstruct(recs, **kw)
+    emitted = [str(w.message) for w in caught if issubclass(w.category, GMRDataWarning)]
+    assert emitted == sol.stats["warnings"]
+    return sol, emitted
+
+
+def _has(msgs, *parts):
+    return any(all(p in m for p in parts) for m in msgs)
+
+
+@pytest.fixture(scope="module")
+def nes():
+    s = g.systems.tristable_nes()
+    return s, g.systems.make_recordings(s, 5e-4, seed=0, duration=DURATION)
+
+
+@pytest.fixture(scope="module")
+def nes_swinging():
+    """The tri-stable NES driven at 4 mm: the outer records leave their wells."""
+    s = g.systems.tristable_nes()
+    return _fit(g.systems.make_recordings(s, 4e-3, seed=0, duration=DURATION))
+
+
+@pytest.fixture(scope="module")
+def joint():
+    return g.systems.bistable_joint()
+
+
+def test_clean_builtin_data_give_no_warning(nes, joint):
+    """The paper's nominal cases are silent (a false warning is as bad as a missed one)."""
+    _, recs = nes
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GMRDataWarning)
+        assert g.reconstruct(recs).stats["warnings"] == []
+        jrecs = g.systems.make_recordings(joint, np.deg2rad(1.0), seed=1, duration=DURATION)
+        assert g.reconstruct(jrecs).stats["warnings"] == []
+
+
+def test_1_two_recordings_of_one_well_are_refused(joint):
+    a = g.systems.make_recordings(joint, np.deg2rad(1.0), seed=0, duration=DURATION)[0]
+    b = dataclasses.replace(g.systems.make_recordings(joint, np.deg2rad(0.5), seed=1, duration=DURATION)[0],
+                            name="joint_S1_again")
+    assert abs(a.x.mean() - b.x.mean()) < 1e-3  # different runs, means 0.0002 apart
+    with pytest.raises(g.GMRInputError, match=r"joint_S1_again and joint_pi_S1 do not give two distinct"):
+        g.reconstruct([a, b])
+
+
+def test_2_record_swinging_between_wells(nes_swinging):
+    _, msgs = nes_swinging
+    assert _has(msgs, "nes_S1 (DOF 0) does not stay in one well", "across the equilibrium of another well")
+    assert _has(msgs, "nes_S3 (DOF 0) does not stay in one well", "middle of its range is almost empty")
+
+
+def test_3_clipped_channel(nes):
+    _, recs = nes
+    x = recs[0].x
+    clipped = dataclasses.replace(recs[0], x=np.minimum(x, np.percentile(x, 97)))
+    _, msgs = _fit([clipped, *recs[1:]])
+    # the clipped well also spoils the model (blown-up interpolant, low R²): warned about too
+    assert msgs[0].startswith("nes_S1: column x0 looks clipped: 151 samples (3.0 %)") and "maximum" in msgs[0]
+    assert not _has(msgs, "column x0 looks clipped", "nes_S2")
+
+
+def test_4_driven_record_without_input(nes):
+    _, recs = nes
+    _, msgs = _fit([dataclasses.replace(recs[0], base_acc=None), *recs[1:]])
+    assert len(msgs) == 1 and _has(msgs, "nes_S1: no input column", "not a free decay")
+
+
+def test_4_free_decay_without_input_is_fine(joint):
+    """A released joint, and one tapped after a quiet second: free decays, no warning."""
+    ts = jnp.arange(4001) / 1000.0
+    xe = joint.equilibria[1]
+    x = np.asarray(g.simulate(joint.truth, g.NoInput(), ts, xe + 0.05).value[0])
+    noise = 1e-4 * np.random.default_rng(0).standard_normal((5001, 1))
+    tapped = np.concatenate([np.full((1000, 1), xe[0]), x[:4001]])
+    for rec in (x + noise[:4001], tapped + noise):
+        assert _sanity.check_missing_input("decay", rec, has_input=False) == []
+
+
+def test_5_different_masses_are_refused(nes):
+    _, recs = nes
+    heavier = dataclasses.replace(recs[1], masses=recs[1].masses * 1.5)
+    with pytest.raises(g.GMRInputError, match=r"nes_S1 and nes_S2 carry different masses \(\[0.035\] and"):
+        g.reconstruct([recs[0], heavier, recs[2]])
+    # explicit masses settle it
+    g.reconstruct([recs[0], heavier, recs[2]], masses=[0.035])
+
+
+def test_6_large_vibration(joint):
+    s = g.systems.bistable_joint("position_dependent")
+    _, msgs = _fit(g.systems.make_recordings(s, np.deg2rad(30.0), seed=0, duration=DURATION))
+    assert _has(msgs, "joint_pd_S1 (DOF 0): vibration amplitude", "% of the distance", "GMR assumes small")
+    assert not _has(msgs, "does not stay in one well")
+
+
+def test_7_low_training_r2(nes_swinging):
+    _, msgs = nes_swinging
+    assert _has(msgs, "nes_S1 (DOF 0): the model explains its own training data poorly (R² -")
+
+
+def test_8_insignificant_kept_terms(nes):
+    _, recs = nes
+    _, msgs = _fit(recs, screen_sigma=None)
+    assert msgs and all("not significant (below 2 standard errors)" in m for m in msgs)
+    assert _has(msgs, "well of nes_S2", "x*v = ")
+
+
+def test_9_global_shape_outside_and_between_the_data(nes_swinging):
+    """Rule 9 on the NES driven across its wells (a 16th-degree law), and on hand-made
+    restoring laws around recorded wells at +-1 (amplitude 0.05)."""
+    _, msgs = nes_swinging
+    assert _has(msgs, "DOF 0: the restoring force turns outward beyond x = ", "F -> -inf as x -> +inf", "runs away")
+    eq, amp, k = np.array([-1.0, 1.0]), np.array([0.05, 0.05]), np.array([2.0, 2.0])
+    # -x + x^3: clean
+    assert _sanity.check_global_shape(0, [0, -1, 0, 1], eq, amp, k) == []
+    # (x^2 - 1) x (x^2 - 2.25) (x^2 - 4): extra wells at +-2 (F' > 0 there), within one span
+    spurious = np.polynomial.polynomial.polyfromroots([-2, -1.5, -1, 0, 1, 1.5, 2])
+    msgs = _sanity.check_global_shape(3, spurious, eq, amp, k)
+    assert _has(msgs, "DOF 3: the model has a well", "x = -2, 2", "spurious outer well")
+    # x (x^2 - 1) (1.69 - x^2): turns outward at |x| = 1.3, barrier 0.027 < interwell energy 0.34
+    msgs = _sanity.check_global_shape(0, [0, -1.69, 0, 2.69, 0, -1], eq, amp, k)
+    assert _has(msgs, "turns outward beyond x = 1.3 ", "x -> +inf") and _has(msgs, "beyond x = -1.3 ", "x -> -inf")
+    # the NES truth turns outward too, but far enough: no warning
+    nes = g.systems.tristable_nes()
+    assert _sanity.check_global_shape(0, g.systems.NES_ALPHA, nes.equilibria[:, 0], np.full(3, 1.5e-3),
+                                      np.array([190.0, 157.0, 155.0])) == []
+
+
+def test_10_default_orders_on_sinusoidal_records(joint):
+    """Displacement-only records of a steady 10 Hz sine: the default (5, 5) library gives an
+    11th-degree global law that blows up between the wells (rule 9, every noise seed tried)
+    and, for this seed, misses its own data (rule 7, R² -2e8)."""
+    ts = jnp.arange(int(DURATION * 1000) + 1) / 1000.0
+    inp = g.BaseSine(np.deg2rad(1.0), 10.0)
+    base = np.asarray(jax.vmap(lambda t: inp(t)[0])(ts))
+    rng = np.random.default_rng(2)
+    recs = []
+    for i, xe in enumerate(joint.equilibria):
+        x = np.asarray(g.simulate(joint.truth, inp, ts, xe).value[0])
+        recs.append(g.Recording(t=np.asarray(ts), x=g.add_noise(x, 60.0, rng), base_acc=base, masses=np.ones(1),
+                                name=f"sine_S{i + 1}"))
+    sol, msgs = _fit(recs)
+    assert sol.stats["dofs"][0].stats["K_r"] == 11
+    assert _has(msgs, "sine_S2 (DOF 0): the model explains its own training data poorly (R² -")
+    assert _has(msgs, "DOF 0: between the recorded equilibria the restoring force reaches", "blew up")
+    assert not _has(msgs, "clipped")  # a noise-free sine input repeats its top sample, no flat tops
+
+
+def test_cli_prints_warnings_records_them_and_strict_exits_3(nes, tmp_path, capsys):
+    _, recs = nes
+    paths = []
+    for r in recs:
+        if r.name == "nes_S1":
+            r = dataclasses.replace(r, x=np.minimum(r.x, np.percentile(r.x, 97)))
+        paths.append(str(tmp_path / f"{r.name}.npz"))
+        g.save_recording(r, paths[-1])
+    out = tmp_path / "m.json"
+    capsys.readouterr()
+    assert main(["fit", *paths, "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("warning: nes_S1: column x0 looks clipped")
+    saved = json.loads(out.read_text())
+    assert saved["format"] == "gmr-model/1" and "clipped" in saved["warnings"][0]
+    assert err.splitlines() == [f"warning: {w}" for w in saved["warnings"]]
+    assert main(["fit", *paths, "--out", str(out), "--strict"]) == 3
+    assert "--strict" in capsys.readouterr().err and out.exists()
+    # a refusal is an input error: exit 2, one line naming both files
+    heavy = tmp_path / "heavy.npz"
+    g.save_recording(dataclasses.replace(recs[1], masses=recs[1].masses * 2, name="heavy"), heavy)
+    assert main(["fit", paths[0], str(heavy), paths[2], "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "nes_S1 and heavy carry different masses" in err and len(err.splitlines()) == 1
