@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def test_no_public_name_shadows_a_submodule():
     submodules = {m.name for m in pkgutil.iter_modules(gmr_jax.__path__)}
-    for name in gmr_jax.__all__ if hasattr(gmr_jax, "__all__") else dir(gmr_jax):
+    for name in dir(gmr_jax):
         if name.startswith("_") or name not in submodules:
             continue
         # a public submodule is fine only when the attribute *is* that module

@@ -23,6 +23,14 @@ def _check_range(x_range, d: int) -> np.ndarray:
     return r
 
 
+def pad_wells(roots: list[np.ndarray]) -> np.ndarray:
+    """Per-DOF lists of wells -> (dof, max_wells) array, NaN-padded (at least one column)."""
+    wells = np.full((len(roots), max(1, max(len(r) for r in roots))), np.nan)
+    for i, r in enumerate(roots):
+        wells[i, : len(r)] = r
+    return wells
+
+
 def polynomial_wells(model: GlobalModel, x_range=None) -> list[np.ndarray]:
     """Real stable zeros (F_i = 0, dF_i/dx > 0) of each DOF's restoring polynomial
     F_i(x) = sum_k stiffness[i, k] x^k (paper Eq. 1 at rest), by the polynomial's companion
@@ -82,8 +90,4 @@ def stable_wells(model: AbstractMechanicalModel, x_range=None, n: int = 20001) -
                 idx = np.nonzero((fx[:-1] < 0) & (fx[1:] >= 0))[0]  # increasing crossing: stable
                 roots = xs[idx] - fx[idx] * (xs[idx + 1] - xs[idx]) / (fx[idx + 1] - fx[idx])
                 out.append(roots)
-    width = max(1, max(len(r) for r in out))
-    wells = np.full((d, width), np.nan)
-    for i, r in enumerate(out):
-        wells[i, : len(r)] = r
-    return wells
+    return pad_wells(out)

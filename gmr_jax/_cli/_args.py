@@ -1,6 +1,7 @@
 """Argument types and checks shared by the `gmr` subcommands (each names the option and the fix)."""
 
 import argparse
+from pathlib import Path
 
 import numpy as np
 
@@ -56,10 +57,8 @@ def join_negative_values(argv):
     return out
 
 
-def output_dir(path) -> "Path":
+def output_dir(path) -> Path:
     """Create --out DIR before any computation, so a bad path fails in a second, not after it."""
-    from pathlib import Path
-
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise GMRInputError(f"--out {out}: exists and is not a directory; give a directory to write into")
@@ -73,10 +72,8 @@ def output_dir(path) -> "Path":
     return out
 
 
-def output_file(path) -> "Path":
+def output_file(path) -> Path:
     """Check that --out FILE can be written before any computation."""
-    from pathlib import Path
-
     out = Path(path)
     if out.is_dir():
         raise GMRInputError(f"--out {out}: is a directory; give a file name, e.g. {out / 'model.json'}")
@@ -138,7 +135,7 @@ def find_wells(model, spec, model_path=None):
     import json
 
     import gmr_jax as gmr
-    from .._basins._wells import polynomial_wells
+    from .._basins._wells import pad_wells, polynomial_wells
 
     d = model.n_dof
     if spec:
@@ -176,10 +173,7 @@ def find_wells(model, spec, model_path=None):
             if dropped:
                 how += "; dropped as spurious outer roots: " + ", ".join(f"DOF {i} at {x:.6g}" for i, x in dropped) + \
                        " (give --x-range to choose the wells yourself)"
-        width = max(1, max(len(r) for r in roots))
-        wells = np.full((d, width), np.nan)
-        for i, r in enumerate(roots):
-            wells[i, : len(r)] = r
+        wells = pad_wells(roots)
     empty = [i for i in range(d) if np.all(np.isnan(wells[i]))]
     if empty:
         where = f"in --x-range {spec}" if spec else "(its restoring polynomial has no real root with positive slope)"
