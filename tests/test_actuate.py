@@ -111,6 +111,7 @@ def test_parse_target_forms():
         parse_target(40, 5)
 
 
+@pytest.mark.slow
 def test_cli_actuate(tmp_path):
     from gmr_jax._cli._main import main
 

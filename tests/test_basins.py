@@ -59,6 +59,7 @@ def test_no_recompile_for_new_grid_values_or_coefficients():
     assert _sweep._sweep_points._cached._cache_size() == before
 
 
+@pytest.mark.slow
 def test_sharded_over_two_host_devices_matches_and_does_not_recompile():
     import subprocess
     import sys

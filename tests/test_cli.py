@@ -37,7 +37,11 @@ def test_fit_hand_made_csv(joint_files, tmp_path, capsys):
     np.testing.assert_allclose([k[1], k[3]], [-2244, 1755], rtol=0.03)
     printed = capsys.readouterr().out
     assert "estimated from x" in printed and "F_0(x, v)" in printed
-    assert json.loads(out.read_text())["format"] == "gmr-model/1"
+    written = json.loads(out.read_text())
+    assert written["format"] == "gmr-model/1"
+    # the region the model was fitted on, per DOF (where basins/actuate look for wells)
+    x = np.concatenate([np.loadtxt(p, delimiter=",", skiprows=1)[:, 1] for p in joint_files])
+    np.testing.assert_allclose(written["data_range"], [[x.min(), x.max()]])
 
 
 def test_fit_manual_threshold_and_baseline(joint_files, tmp_path):
@@ -113,6 +117,7 @@ def test_basins_cli(tmp_path, capsys):
     np.testing.assert_allclose(np.load(out3 / "basins.npz")["wells"], z["wells"])
 
 
+@pytest.mark.slow
 def test_fit_chain_recordings_one_file_per_configuration(tmp_path, capsys):
     """`gmr fit` on a chain: one NPZ per configuration (folded, deployed) of the 3-cell Kresling
     chain; the model is a 3-DOF chain with every cell's restoring force and wells right."""
@@ -132,6 +137,12 @@ def test_fit_chain_recordings_one_file_per_configuration(tmp_path, capsys):
         assert restoring_error(m, s.truth, i, s.x_range[i]) < 0.03
     wells = g.stable_wells(m, s.x_range)
     np.testing.assert_allclose(wells[:, :2], s.equilibria.T, atol=0.02 * np.ptp(s.equilibria))
+    # basins on the fitted chain as the contract writes it (no --x-range): the wells come from the
+    # model within its recorded data range, and they are the truth's
+    assert main(["basins", str(out), "--f", "1:3:2", "--A", "0.01:0.02:2", "--out", str(tmp_path / "b")]) == 0
+    assert "within the training data range" in capsys.readouterr().out
+    z = np.load(tmp_path / "b" / "basins.npz")
+    assert z["config"].shape == (2, 2)
 
 
 @pytest.mark.slow

@@ -129,6 +129,7 @@ def test_selection_kernels_jit_vmap_grad():
     assert float(g[0]) == pytest.approx(float(fd), rel=1e-5)
 
 
+@pytest.mark.slow
 def test_cli_discover(tmp_path, capsys):
     rng = np.random.default_rng(1)
     # tiny hand-made model (m = 1, k = 100, c = 1) and recordings of a truth with Coulomb 0.5 N

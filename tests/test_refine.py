@@ -35,6 +35,8 @@ def sweep_recording(model, amplitude, duration=2.0, fs=200.0, f=(1.0, 8.0), x0=N
 
 #: one settings object shared by the chain tests, so they reuse one compiled solve
 SETTINGS = RefineSettings(window=0.5, stride=4)
+#: a few iterations, for the tests where convergence is not the point
+SHORT = dataclasses.replace(SETTINGS, max_iterations=4)
 
 
 def perturb(model, factors):
@@ -104,7 +106,9 @@ def test_refine_recovers_perturbed_chain(chain_data):
 def test_subset_refinement_keeps_fixed_coefficients(chain_data):
     truth, train, _ = chain_data
     start = perturb(truth, (jnp.array([[1, 1.2, 1, 1], [1, 1, 1, 1]]), jnp.array([[1.5, 1, 1], [1.5, 1, 1]])))
-    sol = refine(start, train, free=[(0, "stiffness", 1)], settings=SETTINGS)
+    sol = refine(start, [head(train[0], 1.0)], free=[(0, "stiffness", 1)],
+                 settings=SHORT, throw=False)
+    assert sol.result in (g.RESULTS.successful, g.RESULTS.nonlinear_max_steps_reached)
     k = np.asarray(sol.value.stiffness)
     np.testing.assert_array_equal(np.delete(k.ravel(), 1), np.delete(np.asarray(start.stiffness).ravel(), 1))
     np.testing.assert_array_equal(np.asarray(sol.value.position_damping), np.asarray(start.position_damping))
@@ -148,16 +152,25 @@ def test_bad_inputs(chain_data):
         refine(truth, train, free="velocity_damping")
 
 
+def head(rec, seconds):
+    """The first `seconds` of a recording (a cheaper training set where convergence is not the point)."""
+    n = int(round(seconds / rec.dt)) + 1
+    return dataclasses.replace(rec, t=rec.t[:n], x=rec.x[:n], v=rec.v[:n], base_acc=rec.base_acc[:n])
+
+
 def test_diverging_start_gives_result_code(chain_data):
     truth, train, _ = chain_data
+    train = [head(train[0], 1.0)]
     # softening cubic with a huge coefficient: windows leave the data range
     bad = dataclasses.replace(truth, stiffness=truth.stiffness.at[:, 3].set(-5e7))
-    sol = refine(bad, train, settings=SETTINGS, throw=False)
+    # one free coefficient and the subset test's settings: the same compiled solve (compiling a
+    # refinement is most of its cost here), the model stays far off either way
+    sol = refine(bad, train, free=[(0, "stiffness", 1)], settings=SHORT, throw=False)
     assert sol.result != g.RESULTS.successful
     assert sol.stats["failed_windows_after"] > 0
     assert np.isinf(sol.stats["train"]["after"].nrmse)
     with pytest.raises(g.GMRComputationError, match="diverged|nonfinite|windows"):
-        refine(bad, train, settings=dataclasses.replace(SETTINGS, max_iterations=2))
+        refine(bad, train, free=[(0, "stiffness", 1)], settings=SHORT)
 
 
 @pytest.mark.slow

@@ -35,6 +35,13 @@ def register(sub):
     return f
 
 
+def data_range(recs):
+    """[min, max] of each DOF's displacement over the training recordings: the region where the
+    model was fitted (`gmr basins`/`actuate` look for wells there when no --x-range is given)."""
+    x = np.concatenate([np.asarray(r.x) for r in recs])
+    return [[float(x[:, i].min()), float(x[:, i].max())] for i in range(x.shape[1])]
+
+
 def run(args) -> int:
     import gmr_jax as gmr
 
@@ -64,7 +71,7 @@ def run(args) -> int:
     model, st = sol.value, sol.stats
     gmr.save_model(model, args.out, method=st["method"],
                    library={"r": lib.restoring_order, "d": lib.damping_order}, training=st["training"],
-                   warnings=list(st["warnings"]))
+                   warnings=list(st["warnings"]), data_range=data_range(recs))
     print(f"{st['method']} model from {len(recs)} recording(s) -> {args.out}")
     for line in model.equations():
         print("  " + line)
