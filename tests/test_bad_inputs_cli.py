@@ -38,6 +38,7 @@ def files() -> dict:
     x = 1e-3 * np.sin(2 * np.pi * 3 * t)
     np.savez(d / "rec.npz", t=t, x=x[:, None], base_acc=np.sin(2 * np.pi * 3 * t))
     np.savez(d / "rec2.npz", t=t, x=0.01 + x[:, None], base_acc=np.sin(2 * np.pi * 3 * t))
+    np.savez(d / "rec_chain.npz", t=t, x=np.stack([x, 0.5 * x], 1), base_acc=np.sin(2 * np.pi * 3 * t))
     np.savez(d / "nan.npz", t=t, x=np.where(t > 0.5, np.nan, x)[:, None], base_acc=np.sin(t))
     np.savez(d / "nonuniform.npz", t=t**1.2, x=x[:, None], base_acc=np.sin(t))
     np.savez(d / "short.npz", t=t[:10], x=x[:10, None], base_acc=np.sin(t[:10]))
@@ -163,6 +164,11 @@ CASES = [
      r"--alpha must lie in \(0, 1\)"),
     ("discover: --n-boot 5", lambda: ["discover", F("indep"), F("rec_npz"), "--n-boot", "5", "--out", OUT()], 2,
      r"--n-boot must be at least 20"),
+    ("discover: --hold-masses and --refit-masses", lambda: ["discover", F("indep"), F("rec_npz"), "--hold-masses",
+                                                            "--refit-masses", "--out", OUT()], 2,
+     r"not allowed with argument"),
+    ("discover: --refit-masses on a chain", lambda: ["discover", F("chain"), F("rec_chain_npz"), "--refit-masses",
+                                                     "--out", OUT()], 2, r"refit_masses needs the independent"),
     ("discover: --decimate 0", lambda: ["discover", F("indep"), F("rec_npz"), "--decimate", "0", "--out", OUT()], 2,
      r"--decimate must be >= 1"),
     ("discover: --out is a file", lambda: ["discover", F("indep"), F("rec_npz"), "--out", F("afile")], 2,

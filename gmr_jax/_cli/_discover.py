@@ -22,6 +22,13 @@ def register(sub):
     p.add_argument("--decimate", type=int, default=1, help="strong form: low-pass and decimate the regression columns by this factor")
     p.add_argument("--alpha", type=float, default=0.05, help="family-wise level of the F-tests (Bonferroni over the catalogue)")
     p.add_argument("--n-boot", type=int, default=200, help="block-bootstrap replicates (stability and intervals)")
+    masses = p.add_mutually_exclusive_group()
+    masses.add_argument("--hold-masses", dest="refit_masses", action="store_const", const=False, default=None,
+                        help="keep the model's masses fixed in the re-calibration")
+    masses.add_argument("--refit-masses", dest="refit_masses", action="store_const", const=True,
+                        help="let the masses move (independent topology; default there), where the data "
+                             "determine them: a DOF without force input, a mass not separable from a "
+                             "model term or moved outside [m/2, 2m] is held anyway, and the report says why")
     p.add_argument("--no-figures", action="store_true")
     p.set_defaults(fn=run)
     return p
@@ -54,7 +61,8 @@ def run(args) -> int:
     recs = [gmr.load_recording(p) for p in args.recordings]
     hold = [gmr.load_recording(p) for p in args.holdout]
     rule = gmr.SelectionRule(alpha=args.alpha, n_boot=args.n_boot)
-    rep = gmr.discover(model, recs, hold, rule=rule, form=args.form, decimate=args.decimate, error=args.error).value
+    rep = gmr.discover(model, recs, hold, rule=rule, form=args.form, decimate=args.decimate, error=args.error,
+                       refit_masses=args.refit_masses).value
     gmr.save_model(rep.model, out / "augmented_model.json", method="gmr discover",
                discovered=[{k: f[k] for k in ("dof", "physics", "coefficient", "ci95")} for f in rep.findings])
     d = rep.to_dict("augmented_model.json")

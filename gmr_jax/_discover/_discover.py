@@ -34,6 +34,8 @@ from .._simulate._integrate import Integrator
 from .._simulate._simulate import simulate
 from ._catalogue import PLAIN, Term, default_catalogue, model_terms
 from ._equation import dof_rows
+from ._identify import (MASS_RANGE, VIF_MAX, DofIdentifiability, ambiguous, closest, explained, homogeneous,
+                        mass_believable, screen, vif)
 from ._locate import locate, where_sentence
 from ._select import SelectionRule, select_terms
 
@@ -56,6 +58,12 @@ class DiscoveryReport:
     selection: list
     settings: dict
     series: dict = field(default_factory=dict, repr=False)
+    identifiability: list = field(default_factory=list)
+
+    @property
+    def not_separable(self) -> list:
+        """Candidates the data cannot separate from the model's own terms or mass (never findings)."""
+        return [e for d in self.identifiability for e in d.not_separable]
 
     def to_dict(self, model_file: str = "augmented_model.json") -> dict:
         """The Discovery report JSON of the contracts (plus optional extra keys)."""
@@ -69,6 +77,8 @@ class DiscoveryReport:
             "selection": self.selection,
             "location": self.location,
             "settings": self.settings,
+            "not_separable": self.not_separable,
+            "identifiability": [d.to_dict() for d in self.identifiability],
         }
 
     def summary(self) -> str:
@@ -194,6 +204,11 @@ def discover(
     - `support`: weak-form test-function support in samples (default: one period at the band
       edge). `decimate`: strong form, low-pass and decimate the regression columns in parallel.
     - `refit_masses`: let the masses move in the re-calibration (default: independent topology).
+      Only where the data determine them (`_identify`): a DOF with no force input (base
+      excitation, free decay: a homogeneous equation), a mass not separable from the model's
+      terms, or one the fit moves outside [m/2, 2m] is held, and `report.identifiability` says
+      why. Candidates not separable from the re-calibration columns, or from each other beyond
+      them, are listed in `report.not_separable`, never as findings.
     - `error`: "auto" (output error when both models simulate, else equation error),
       "output" or "equation".
 
@@ -233,7 +248,7 @@ def discover(
                 "rule": rule.__dict__, "holdout": [r.name for r in hold] or "estimation recordings "
                 "(no holdout given)", "estimation": [r.name for r in recs]}
 
-    findings, corrections, location, selection = [], [], [], []
+    findings, corrections, location, selection, identifiability = [], [], [], [], []
     new_terms, mass_corr = [], np.zeros(d)
     series = {"resid_before": [], "resid_after": [], "x": [], "v": [], "t": []}
     for i in range(d):
@@ -245,16 +260,63 @@ def discover(
                          mass_column=refit_masses) for r in recs]
         y = np.concatenate([r.y for r in rows])
         X = np.concatenate([r.columns for r in rows])
-        Xb = X[:, : len(base)]
-        if refit_masses:
-            Xb = np.concatenate([np.concatenate([r.mass for r in rows])[:, None], Xb], 1)
-        sel = select_terms(Xb, X[:, len(base):], y, rule)
-        off = 1 if refit_masses else 0
-        if refit_masses:
+        Xb, Xc = X[:, : len(base)], X[:, len(base):]
+        labels = [t.label for t in base]
+        m_i = float(np.asarray(model.masses)[i])
+        ident = DofIdentifiability(i, "refit" if refit_masses else "given")
+        mcol = np.concatenate([r.mass for r in rows]) if refit_masses else None
+        if refit_masses and homogeneous(rows):
+            ident.mass, ident.why = "held", (
+                f"no force input on this DOF in the estimation recordings (base excitation or free "
+                f"decay): its equation m a + F(x, v) = 0 is homogeneous, so the data fix only ratios "
+                f"to the mass; the mass sets the scale and is held at {m_i:.6g}")
+        elif refit_masses and vif(explained(mcol, Xb)) >= VIF_MAX:
+            with_, corr = closest(mcol, Xb, labels)
+            ident.mass, ident.why = "held", (
+                f"the mass is not separable from {with_} with these data (correlation {corr:.3f}): "
+                f"held at {m_i:.6g}")
+
+        def select(with_mass):
+            B = np.concatenate([mcol[:, None], Xb], 1) if with_mass else Xb
+            keep, ns, vifs = screen(B, Xc, (["mass"] if with_mass else []) + labels,
+                                    [t.label for t in cands], [t.physics for t in cands])
+            sel = select_terms(B, Xc[:, keep], y, rule)
+            amb = ambiguous(B, Xc, [keep[k] for k in sel.kept], [t.label for t in cands])
+            if not amb:
+                return keep, ns, vifs, sel
+            # a kept term that another candidate reproduces: these data cannot name what it
+            # explains, and neither can a substitute (the next candidate would take its place
+            # with the same signal), so selection on this DOF stops at the terms before it
+            bad = {k for k, _, _ in amb}
+            for k, j, corr in amb:
+                ns.append({"physics": cands[k].physics, "term": cands[k].label, "with": cands[j].label,
+                           "correlation": corr, "r2": corr**2, "vif": vif(corr**2),
+                           "reason": f"explains part of the residual, but these data cannot tell it "
+                                     f"from {cands[j].physics} ({cands[j].label}; correlation {corr:.3f} "
+                                     f"beyond the re-calibrated terms): not a finding, and the part "
+                                     f"it explains is left unattributed"})
+            good = [keep[k] for k in sel.kept if keep[k] not in bad]
+            return good, ns, vifs, select_terms(B, Xc[:, good], y, rule)
+
+        refit_i = ident.mass == "refit"
+        keep, ns, vifs, sel = select(refit_i)
+        if refit_i and not mass_believable(m_i, float(sel.coef_base[0])):
+            ident.mass, ident.why = "held", (
+                f"the re-calibration moved the mass {m_i:.6g} -> {m_i + float(sel.coef_base[0]):.4g}, "
+                f"outside [{MASS_RANGE[0]:g}, {MASS_RANGE[1]:g}] x the model's: not believed (the "
+                f"data do not fix the mass); held at {m_i:.6g} and the DOF refitted")
+            refit_i = False
+            keep, ns, vifs, sel = select(False)
+        ident.not_separable = [dict(e, dof=i) for e in ns]
+        ident.vif = vifs
+        identifiability.append(ident)
+        cands = [cands[j] for j in keep]
+        off = 1 if refit_i else 0
+        if refit_i:
             mass_corr[i] = sel.coef_base[0]
             corrections.append({"dof": i, "physics": "mass", "coefficient": float(sel.coef_base[0]),
                                 "ci95": sel.ci_base[0].tolist(),
-                                "model_value": float(np.asarray(model.masses)[i])})
+                                "model_value": m_i})
         given = {(t["physics"], t["order"]): t["coefficient"] for t in model.terms() if t["dof"] == i}
         for k, t in enumerate(base):
             c = float(sel.coef_base[off + k])
@@ -286,7 +348,9 @@ def discover(
             new_terms.append(t.model_term(sel.coef_kept[k]))
         selection.append({
             "dof": i, "form": form, "rows": sel.n_rows, "tau_rows": sel.tau,
-            "recalibration_terms": (["mass"] if refit_masses else []) + [t.label for t in base],
+            "recalibration_terms": (["mass"] if refit_i else []) + [t.label for t in base],
+            "mass": ident.mass,
+            "not_separable": ident.not_separable,
             "candidates": [t.physics + (f"_{t.order}" if t.family == "position_damping" else "")
                            for t in cands],
             "steps": [dict(s, candidate=cands[s["candidate"]].label) for s in sel.steps],
@@ -327,7 +391,7 @@ def discover(
         e["nrmse"] = e["output_nrmse"] if use_output else e["equation_nrmse"]
         e["on"] = "holdout" if hold else "estimation (no holdout given)"
     report = DiscoveryReport(findings, corrections, before, after, aug, model, location, selection,
-                             settings, series)
+                             settings, series, identifiability)
     finite = all(np.all(np.isfinite(np.asarray(getattr(aug, k)))) for k in
                  ("masses", "stiffness", "velocity_damping", "position_damping"))
     result = RESULTS.successful if finite else RESULTS.nonfinite

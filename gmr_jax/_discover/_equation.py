@@ -48,6 +48,8 @@ class Rows:
     v: np.ndarray | None = None
     u: np.ndarray | None = None
     scale: float = 1.0  # squared norm of the applied force rows (inertia rows if no force)
+    applied_sq: float = 0.0  # squared norm of the applied (input) force rows
+    inertia_sq: float = 0.0  # squared norm of the inertial force rows
 
 
 def model_force(model, x: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -122,7 +124,8 @@ def dof_rows(
                                           for z in (y, tgt, xd, vd, u, applied))
             cols = _pdecimate(cols, decimate, trim) if cols.shape[1] else np.zeros((y.shape[0], 0))
             m = None if m is None else _pdecimate(m, decimate, trim)
-        return Rows(y, cols, m, tgt, xd, vd, u, _scale(applied, applied - tgt))
+        return Rows(y, cols, m, tgt, xd, vd, u, _scale(applied, applied - tgt),
+                    float(applied @ applied), float((applied - tgt) @ (applied - tgt)))
     if form != "weak":
         raise ValueError(f"form must be 'strong' or 'weak', got {form!r}")
     dt = rec.dt
@@ -139,7 +142,8 @@ def dof_rows(
     applied = topo.carried(fw)[:, dof]
     y = tgt - _integrate(F, psi, stride, dt)
     cw = _integrate(cols, psi, stride, dt) if cols.shape[1] else np.zeros((y.shape[0], 0))
-    return Rows(y, cw, acc[:, dof] if mass_column else None, tgt, scale=_scale(applied, applied - tgt))
+    return Rows(y, cw, acc[:, dof] if mass_column else None, tgt, scale=_scale(applied, applied - tgt),
+                applied_sq=float(applied @ applied), inertia_sq=float((applied - tgt) @ (applied - tgt)))
 
 
 def _scale(applied, inertia) -> float:

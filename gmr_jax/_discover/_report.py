@@ -41,6 +41,11 @@ def summary(report) -> str:
             lines.append(f"  re-calibration, {_cell(report, c['dof'])}: {what} {_g(mv)} -> "
                          f"{_g(mv + c['coefficient'])} (correction {_g(c['coefficient'])}, 95 % CI "
                          f"{_g(lo)} to {_g(hi)})")
+    for d in report.identifiability:
+        if d.mass == "held":
+            lines.append(f"  held, {_cell(report, d.dof)}: mass: {d.why}")
+        for e in d.not_separable:
+            lines.append(f"  not separable, {_cell(report, d.dof)}: {e['physics']} ({e['term']}): {e['reason']}")
     for s in report.selection:
         for r in s["rejected"]:
             lines.append(f"  not reported, {_cell(report, s['dof'])}: {r['physics']} ({r['term']}): {r['reason']}")

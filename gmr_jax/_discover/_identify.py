@@ -1,0 +1,129 @@
+"""What the estimation data can determine, decided before anything is re-calibrated or named.
+
+- **Scale (the mass).** With no force input on a DOF (base excitation, free decay) its equation
+  m a + F(x, v) = 0 is homogeneous: (m, every coefficient) x c fits exactly as well for any c, so a
+  least-squares re-calibration that may move the mass slides to the trivial c -> 0. The mass is
+  then held: it sets the scale, and the data fix only ratios to it.
+- **Separability (variance inflation).** A column that the others reproduce (uncentred R^2 of
+  its least-squares fit on them >= 1 - 1/`VIF_MAX`) cannot be told apart from them with these
+  data: a candidate so confounded with the re-calibration columns (the model's own terms, the
+  mass) is reported as "not separable from <term>" with the correlation, never as a finding; a
+  mass so confounded with the model's terms is held.
+- **A re-calibrated mass must stay a mass.** A mass moved outside [m/2, 2m] (or to <= 0) by the
+  re-calibration is not believed: it is held and the DOF refitted.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: variance inflation above which a column is not separable from the others (R^2 >= 0.95)
+VIF_MAX = 20.0
+#: applied-force energy relative to the inertial one below which a DOF has no force input
+HOMOGENEOUS = 1e-12
+#: the range a re-calibrated mass may move within, relative to the model's mass
+MASS_RANGE = (0.5, 2.0)
+
+
+@dataclass
+class DofIdentifiability:
+    """The decisions for one DOF (reported under `identifiability` in the discovery report)."""
+
+    dof: int
+    mass: str  # "refit", "held" or "given" (chain: masses are not re-calibrated)
+    why: str = ""
+    not_separable: list = field(default_factory=list)
+    vif: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return {"dof": self.dof, "mass": self.mass, "why": self.why,
+                "not_separable": self.not_separable, "vif": self.vif}
+
+
+def _unit(X: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(X, axis=0)
+    return X / np.where(n > 0, n, 1.0)
+
+
+def explained(c: np.ndarray, X: np.ndarray) -> float:
+    """Uncentred R^2 of the least-squares fit of column `c` on the columns of `X` (0 when X is
+    empty or c is zero). The models have no intercept unless they carry a preload term, so the
+    uncentred measure is the one that matches the regression."""
+    cc = float(c @ c)
+    if X.shape[1] == 0 or cc == 0.0:
+        return 0.0
+    Xu = _unit(X)
+    coef, *_ = np.linalg.lstsq(Xu, c, rcond=1e-12)
+    r = c - Xu @ coef
+    return float(np.clip(1.0 - (r @ r) / cc, 0.0, 1.0))
+
+
+def vif(r2: float) -> float:
+    return float(np.inf) if r2 >= 1.0 else 1.0 / (1.0 - r2)
+
+
+def closest(c: np.ndarray, X: np.ndarray, labels: list[str]) -> tuple[str, float]:
+    """The column of X most correlated (uncentred cosine) with c, and that correlation."""
+    cu = c / max(np.linalg.norm(c), 1e-300)
+    cos = _unit(X).T @ cu
+    k = int(np.argmax(np.abs(cos)))
+    return labels[k], float(cos[k])
+
+
+def homogeneous(rows) -> bool:
+    """True when the DOF carries no applied force in any of the rows (its equation has no scale)."""
+    applied = sum(r.applied_sq for r in rows)
+    inertia = sum(r.inertia_sq for r in rows)
+    return applied <= HOMOGENEOUS * max(inertia, 1e-300)
+
+
+def screen(Xb: np.ndarray, Xc: np.ndarray, base_labels: list[str], cand_labels: list[str],
+           cand_physics: list[str]) -> tuple[list[int], list[dict], dict]:
+    """Candidates separable from the re-calibration columns `Xb`: (indices kept, not-separable
+    entries, VIF of every candidate)."""
+    keep, out, vifs = [], [], {}
+    for j in range(Xc.shape[1]):
+        r2 = explained(Xc[:, j], Xb)
+        vifs[cand_labels[j]] = vif(r2)
+        if vif(r2) >= VIF_MAX:
+            with_, corr = closest(Xc[:, j], Xb, base_labels)
+            out.append({"physics": cand_physics[j], "term": cand_labels[j], "with": with_,
+                        "correlation": corr, "r2": r2, "vif": vif(r2),
+                        "reason": f"not separable from {with_} with these data (correlation "
+                                  f"{corr:.3f}, R^2 {r2:.3f} on the re-calibration columns): "
+                                  f"not a finding"})
+        else:
+            keep.append(j)
+    return keep, out, vifs
+
+
+def mass_believable(m: float, dm: float) -> bool:
+    lo, hi = MASS_RANGE
+    new = m + dm
+    return bool(np.isfinite(new) and lo * m <= new <= hi * m)
+
+
+def residualised(B: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """The columns of X with their least-squares fit on B removed (what B cannot explain)."""
+    if B.shape[1] == 0:
+        return X
+    Q, _ = np.linalg.qr(_unit(B))
+    return X - Q @ (Q.T @ X)
+
+
+def ambiguous(B: np.ndarray, Xc: np.ndarray, kept: list[int], labels: list[str]) -> list[tuple[int, int, float]]:
+    """Kept candidates that another candidate (kept or not) reproduces once the re-calibration
+    columns B are accounted for: (kept index, other index, partial correlation) with partial
+    R^2 >= 1 - 1/VIF_MAX. Such a term explains something, but these data cannot say which
+    physics it is (at one forcing frequency, quadratic drag beyond its viscous part and cubic
+    damping are both a third harmonic)."""
+    R = _unit(residualised(B, Xc))
+    out = []
+    for k in kept:
+        c = R.T @ R[:, k]
+        c[k] = 0.0
+        c[[j for j in kept if j != k]] = 0.0  # two kept terms are a joint fit, not a confusion
+        j = int(np.argmax(np.abs(c)))
+        if c[j] ** 2 >= 1.0 - 1.0 / VIF_MAX:
+            out.append((k, j, float(c[j])))
+    return out

@@ -1,0 +1,94 @@
+"""Identifiability before discovery (issue 14): the mass of a homogeneous equation is held, a
+candidate the data cannot separate from the model's terms (or from another candidate beyond
+them) is listed as not separable and never reported as a finding."""
+
+import numpy as np
+import pytest
+
+import gmr_jax
+from gmr_jax._discover._identify import (VIF_MAX, ambiguous, closest, explained, homogeneous, mass_believable,
+                                         screen)
+from gmr_jax._discover._equation import Rows
+from studies.scenarios import Scenario, build_full
+
+K = (2 * np.pi * 2.0) ** 2
+C = 2 * 0.05 * np.sqrt(K)
+LIN = {"dof": 0, "physics": "stiffness", "order": 1, "coefficient": K}
+VISC = {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": C}
+T = gmr_jax.Term
+RULE = gmr_jax.SelectionRule(n_boot=60)
+
+
+def test_explained_is_the_uncentred_r2_of_least_squares(rng):
+    X = rng.normal(size=(400, 3))
+    c = X @ [1.0, -2.0, 0.5] + 0.3 * rng.normal(size=400)
+    coef, *_ = np.linalg.lstsq(X, c, rcond=None)
+    r = c - X @ coef
+    assert explained(c, X) == pytest.approx(1 - r @ r / (c @ c), rel=1e-10)
+    assert explained(c, np.zeros((400, 0))) == 0.0 and explained(np.zeros(400), X) == 0.0
+    assert explained(X[:, 1] * 3.0, X) == pytest.approx(1.0)
+
+
+def test_screen_flags_a_column_the_others_reproduce(rng):
+    t = np.linspace(0, 10, 2000)
+    v = np.cos(2 * np.pi * 2.5 * t)
+    B = v[:, None]
+    drag, coul, noise = np.sign(v) * v**2, np.sign(v), rng.normal(size=t.size)
+    keep, ns, vifs = screen(B, np.stack([drag, coul, noise], 1), ["v"], ["v|v|", "sgn(v)", "n"],
+                            ["quadratic_drag", "coulomb_friction", "noise"])
+    assert keep == [1, 2]  # one frequency: v|v| is 98 % v; sgn(v) 90 % (VIF 5), still separable
+    assert ns[0]["physics"] == "quadratic_drag" and ns[0]["with"] == "v" and ns[0]["vif"] >= VIF_MAX
+    assert closest(drag, B, ["v"]) == ("v", pytest.approx(0.98, abs=0.01))
+    assert vifs["n"] == pytest.approx(1.0, abs=0.01)
+
+
+def test_ambiguous_kept_term_is_one_another_candidate_reproduces(rng):
+    t = np.linspace(0, 10, 2000)
+    v = np.cos(2 * np.pi * 2.5 * t)
+    B = v[:, None]
+    Xc = np.stack([np.sign(v) * v**2, np.sign(v) * np.abs(v) ** 3, rng.normal(size=t.size)], 1)
+    amb = ambiguous(B, Xc, [1], ["v|v|", "v^3", "n"])
+    assert [(k, j) for k, j, _ in amb] == [(1, 0)]  # beyond v, both are a third harmonic
+    assert ambiguous(B, Xc, [2], ["v|v|", "v^3", "n"]) == []
+
+
+def test_homogeneous_and_believable_mass():
+    rows = [Rows(np.zeros(3), np.zeros((3, 0)), None, applied_sq=0.0, inertia_sq=2.0)]
+    assert homogeneous(rows)
+    assert not homogeneous(rows + [Rows(np.zeros(3), np.zeros((3, 0)), None, applied_sq=1e-3, inertia_sq=2.0)])
+    assert mass_believable(1.0, 0.4) and not mass_believable(1.0, -0.9) and not mass_believable(1.0, np.nan)
+
+
+def test_base_excited_independent_dof_holds_the_mass_and_finds_the_friction():
+    """Issue 14, finding 1: base excitation, independent topology (what `gmr fit` writes), hidden
+    Coulomb friction. Before: mass 1 -> 2e-8, every coefficient scaled to ~0, "nothing missing"."""
+    eff = (T(0, "velocity_damping", 0), 0.15, T(0, "velocity_damping", 1))
+    sc = Scenario("base", (1.0,), "independent", (LIN, VISC), eff, amplitude=20.0, duration=12.0,
+                  excite="base", snr_db=50.0)
+    b = build_full(sc)
+    rep = gmr_jax.discover(b.model, b.est, b.hold, rule=RULE).value
+    idf = rep.identifiability[0]
+    assert idf.mass == "held" and "no force input" in idf.why
+    np.testing.assert_array_equal(np.asarray(rep.model.masses), [1.0])
+    assert [f["physics"] for f in rep.findings] == ["coulomb_friction"]
+    assert rep.findings[0]["coefficient"] == pytest.approx(b.c_eff, rel=0.1)
+    k1 = float(np.asarray(rep.model.stiffness)[0, 1])
+    assert k1 == pytest.approx(K, rel=0.02)  # nothing slid towards zero
+    assert rep.after["nrmse"] < 0.5 * rep.before["nrmse"]
+    assert "held, DOF 0: mass: no force input" in rep.summary()
+    d = rep.to_dict()
+    assert d["identifiability"][0]["mass"] == "held" and d["not_separable"] == []
+
+
+def test_one_frequency_drag_is_not_separable_and_not_a_finding():
+    """At one forcing frequency quadratic drag is viscous damping plus a third harmonic that
+    cubic damping (or x^2 v with Coulomb) reproduces just as well: no finding, listed."""
+    eff = (T(0, "velocity_damping", 2), 0.30, T(0, "velocity_damping", 1))
+    sc = Scenario("drag1f", (1.0,), "independent", (LIN, VISC), eff, amplitude=20.0, duration=12.0,
+                  band=(2.5, 2.5), snr_db=50.0)
+    b = build_full(sc)
+    rep = gmr_jax.discover(b.model, b.est, b.hold, rule=RULE).value
+    assert rep.findings == []
+    phys = [e["physics"] for e in rep.not_separable]
+    assert "quadratic_drag" in phys
+    assert "not separable" in rep.summary()
