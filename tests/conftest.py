@@ -4,16 +4,29 @@ Importing gmr_jax enables float64 (`jax_enable_x64`) before any test builds an a
 also runs with JAX's strict rank promotion, so an implicit broadcast between arrays of different
 rank is an error here rather than a silent shape bug.
 
-XLA's CPU runtime can wedge its multi-threaded Eigen pool on vmap-heavy graphs (seen here: a CI
-run that never returned from `select_threshold`; jax-ml/jax#25861 and PyAutoFit#1528/#1530 report
-the same, and `--xla_cpu_multi_thread_eigen=false` as the cure). The suite runs with that flag (xdist
-already gives one process per core, so intra-op threads bought little here).
-Subprocesses (CLI runs, notebook kernels) inherit the flags through the environment.
+A hang seen in CI (a worker idle for ever in `select_threshold`) was jaxlib 0.10.2's LAPACK batch
+kernels: a vmapped QR hands its batch to XLA's intra-op pool and blocks, and two such calls at
+once fill a 2-thread pool with waiters. The STLS kernels now factorise without LAPACK
+(`gmr_jax/_fit/_householder.py`); pytest-timeout (pyproject) turns any future hang into a named
+failure after 15 min instead of eating CI's 90.
+
+Compilation, not execution, is most of the suite's time (measured with jax.monitoring: about
+225 s of XLA backend compilation per worker out of 360 s, 1,800 compilations). So the suite runs
+with two XLA flags that only change how the code is compiled, not what it computes (IEEE float64
+either way; results can differ in the last bits, as between machines):
+- `--xla_backend_optimization_level=0`: LLVM does not optimise the generated code; compiling
+  is faster and the tests' small problems do not run noticeably slower (user time of the default
+  tier 11:18 -> 9:46 on 2 cores).
+- `--xla_cpu_multi_thread_eigen=false`: xdist already runs one process per core, and two workers
+  each spreading over both cores only contend.
+Subprocesses (CLI runs, notebook kernels) inherit them through the environment. The persistent
+compilation cache below helps little (a warm cache did not shorten the default tier: most of
+the compiled code is not shared between tests) but costs nothing.
 """
 
 import os
 
-_FLAGS = ("--xla_cpu_multi_thread_eigen=false",)
+_FLAGS = ("--xla_cpu_multi_thread_eigen=false", "--xla_backend_optimization_level=0")
 os.environ["XLA_FLAGS"] = " ".join(
     [os.environ.get("XLA_FLAGS", "")] + [f for f in _FLAGS if f not in os.environ.get("XLA_FLAGS", "")]
 ).strip()
@@ -41,7 +54,7 @@ def pytest_collection_modifyitems(config, items):
     # `-m slow` alone, so the rule lives here)
     if config.getoption("-m"):
         return
-    skip = pytest.mark.skip(reason="slow tier: run with `pytest -m slow` (or `-m ''` for all)")
+    skip = pytest.mark.skip(reason='slow tier: run with `pytest -m slow` (`-m "slow or not slow"` for all)')
     for item in items:
         if "slow" in item.keywords:
             item.add_marker(skip)

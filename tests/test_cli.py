@@ -44,9 +44,15 @@ def test_fit_hand_made_csv(joint_files, tmp_path, capsys):
     np.testing.assert_allclose(written["data_range"], [[x.min(), x.max()]])
 
 
+@pytest.mark.slow
 def test_fit_manual_threshold_and_baseline(joint_files, tmp_path):
+    """A fixed threshold and the baseline (GMC-SINDy) from the CLI; end to end, so slow tier (the
+    baseline itself is tested in test_reconstruct, its vmapped threshold kernels in test_stls)."""
     assert main(["fit", *joint_files, "--out", str(tmp_path / "a.json"), "--threshold", "0.01"]) == 0
     assert main(["fit", *joint_files, "--out", str(tmp_path / "b.json"), "--method", "gmc-sindy", "-r", "7", "-d", "7"]) == 0
+    a, b = (json.loads((tmp_path / n).read_text()) for n in ("a.json", "b.json"))
+    assert a["method"] != b["method"] and "sindy" in b["method"].lower(), (a["method"], b["method"])
+    assert b["library"] == {"r": 7, "d": 7}
 
 
 def _bad(tmp_path, name, **arrays):

@@ -1,5 +1,6 @@
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import gmr_jax as g
 from gmr_jax._simulate._frequency import resonance_frequencies, transmissibility
@@ -26,6 +27,7 @@ def test_resonance_of_linearised_chain():
     assert abs(float(td_low[0])) < 0.5
 
 
+@pytest.mark.slow
 def test_resonance_peaks_refine_to_the_exact_linear_peak():
     """Linear oscillator under base motion: |T(r)|² = (1 + (2ζr)²) / ((1 - r²)² + (2ζr)²).
     The refined peak of a coarse 25-point curve lands on the exact maximum."""

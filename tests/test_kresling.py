@@ -121,7 +121,7 @@ def test_jit_vmap_grad(chain):
     np.testing.assert_allclose(
         np.asarray(fs[1]),
         np.asarray(all_at_once(chain, 2 * x, v)[0] - chain.damping(2 * x, v)),
-        rtol=1e-10,
+        rtol=1e-10, atol=1e-12 * float(np.max(np.abs(np.asarray(fs[1])))),  # a cell force near 0 cancels
     )
     # grad in the state: the tangent stiffness matrix is diagonal and matches the cells
     np.testing.assert_allclose(np.asarray(jac - jnp.diag(jnp.diag(jac))), 0.0, atol=1e-12)
@@ -177,6 +177,7 @@ def test_systems():
     assert np.all(np.diff(k) > 0)
 
 
+@pytest.mark.slow  # simulates the 5-cell chain's training data
 def test_recordings_are_finite_small_and_shrink_towards_the_tip():
     s = kresling5()
     recs = gmr_jax.systems.make_recordings(s, KRESLING5_AMPLITUDE)

@@ -102,6 +102,7 @@ def test_unshared_velocity_damping_mask():
     assert [t for t, m in zip(terms, mask) if m] == [("velocity_damping", 3)]
 
 
+@pytest.mark.slow  # a 5-cell reproduction, twice
 def test_damping_terms_found_at_one_well_only_are_dropped():
     """Kresling chain (damping ratio 0.2, 0.75 mm, seed 4): the base cell's folded-well fit
     selects v|v|, v^3, v^3|v| (each > 3 sigma) in place of the unselected x^2 v; averaged by

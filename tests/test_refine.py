@@ -65,7 +65,7 @@ def chain_data():
     return truth, train, hold
 
 
-def test_gradient_matches_central_differences():
+def _gradient_problem():
     s = g.systems.bistable_joint("position_independent")
     xe = float(s.equilibria[1, 0])
     rec = sweep_recording(s.truth, np.deg2rad(2.0), duration=0.5, fs=250.0, f=(5.0, 15.0), x0=[xe])
@@ -78,11 +78,25 @@ def test_gradient_matches_central_differences():
     def obj(p):
         return 0.5 * jnp.sum(prob.residuals(p, wins)[0] ** 2)
 
-    grad = np.asarray(eqx.filter_jit(jax.grad(obj))(p0))
     h = 1e-6
     fd = np.array([(float(obj(p0.at[i].add(h))) - float(obj(p0.at[i].add(-h)))) / (2 * h) for i in range(3)])
+    return prob, p0, wins, obj, fd
+
+
+def test_jacobian_matches_central_differences():
+    """The Jacobian optimistix uses (forward mode through the solves) against central differences."""
+    prob, p0, wins, _, fd = _gradient_problem()
+    r, jac = eqx.filter_jit(lambda p: prob.residuals_and_jacobian(p, wins))(p0)
+    np.testing.assert_allclose(np.asarray(jac.T @ r), fd, rtol=1e-4)
+
+
+@pytest.mark.slow
+def test_gradient_matches_central_differences():
+    """Reverse mode (checkpointed adjoint; 16 s of compilation, hence the slow tier) against
+    central differences and against the forward-mode Jacobian."""
+    prob, p0, wins, obj, fd = _gradient_problem()
+    grad = np.asarray(eqx.filter_jit(jax.grad(obj))(p0))
     np.testing.assert_allclose(grad, fd, rtol=1e-4)
-    # the Jacobian optimistix uses (forward mode) agrees with the checkpointed-adjoint gradient ...
     r, jac = eqx.filter_jit(lambda p: prob.residuals_and_jacobian(p, wins))(p0)
     np.testing.assert_allclose(np.asarray(jac.T @ r), grad, rtol=1e-8)
 
@@ -103,6 +117,7 @@ def test_refine_recovers_perturbed_chain(chain_data):
     assert st["iterations"] >= 1 and st["failed_windows_after"] == 0
 
 
+@pytest.mark.slow
 def test_subset_refinement_keeps_fixed_coefficients(chain_data):
     truth, train, _ = chain_data
     start = perturb(truth, (jnp.array([[1, 1.2, 1, 1], [1, 1, 1, 1]]), jnp.array([[1.5, 1, 1], [1.5, 1, 1]])))
@@ -158,6 +173,7 @@ def head(rec, seconds):
     return dataclasses.replace(rec, t=rec.t[:n], x=rec.x[:n], v=rec.v[:n], base_acc=rec.base_acc[:n])
 
 
+@pytest.mark.slow
 def test_diverging_start_gives_result_code(chain_data):
     truth, train, _ = chain_data
     train = [head(train[0], 1.0)]

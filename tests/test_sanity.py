@@ -53,12 +53,19 @@ def joint():
     return g.systems.bistable_joint()
 
 
-def test_clean_builtin_data_give_no_warning(nes, joint):
+def test_clean_builtin_data_give_no_warning(nes):
     """The paper's nominal cases are silent (a false warning is as bad as a missed one)."""
     _, recs = nes
     with warnings.catch_warnings():
         warnings.simplefilter("error", GMRDataWarning)
         assert g.reconstruct(recs).stats["warnings"] == []
+
+
+@pytest.mark.slow
+def test_clean_joint_data_give_no_warning(joint):
+    """As above, on the bistable joint (a second full reconstruction: slow tier)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GMRDataWarning)
         jrecs = g.systems.make_recordings(joint, np.deg2rad(1.0), seed=1, duration=DURATION)
         assert g.reconstruct(jrecs).stats["warnings"] == []
 

@@ -59,6 +59,7 @@ class DiscoveryReport:
     settings: dict
     series: dict = field(default_factory=dict, repr=False)
     identifiability: list = field(default_factory=list)
+    warnings: list = field(default_factory=list)
 
     @property
     def not_separable(self) -> list:
@@ -79,6 +80,7 @@ class DiscoveryReport:
             "settings": self.settings,
             "not_separable": self.not_separable,
             "identifiability": [d.to_dict() for d in self.identifiability],
+            "warnings": self.warnings,
         }
 
     def summary(self) -> str:
@@ -281,7 +283,7 @@ def discover(
             keep, ns, vifs = screen(B, Xc, (["mass"] if with_mass else []) + labels,
                                     [t.label for t in cands], [t.physics for t in cands])
             sel = select_terms(B, Xc[:, keep], y, rule)
-            amb = ambiguous(B, Xc, [keep[k] for k in sel.kept], [t.label for t in cands])
+            amb = ambiguous(B, Xc, [keep[k] for k in sel.kept], y, sel.n_rows / max(sel.tau, 1.0), rule.alpha)
             if not amb:
                 return keep, ns, vifs, sel
             # a kept term that another candidate reproduces: these data cannot name what it
@@ -291,10 +293,11 @@ def discover(
             for k, j, corr in amb:
                 ns.append({"physics": cands[k].physics, "term": cands[k].label, "with": cands[j].label,
                            "correlation": corr, "r2": corr**2, "vif": vif(corr**2),
-                           "reason": f"explains part of the residual, but these data cannot tell it "
-                                     f"from {cands[j].physics} ({cands[j].label}; correlation {corr:.3f} "
-                                     f"beyond the re-calibrated terms): not a finding, and the part "
-                                     f"it explains is left unattributed"})
+                           "reason": f"explains part of the residual, but these data fit "
+                                     f"{cands[j].physics} ({cands[j].label}) in its place as well (no "
+                                     f"significant difference; correlation {corr:.3f} beyond the "
+                                     f"re-calibrated terms): not a finding, and the part it explains is "
+                                     f"left unattributed"})
             good = [keep[k] for k in sel.kept if keep[k] not in bad]
             return good, ns, vifs, select_terms(B, Xc[:, good], y, rule)
 
@@ -390,11 +393,18 @@ def discover(
         e["kind"] = kind
         e["nrmse"] = e["output_nrmse"] if use_output else e["equation_nrmse"]
         e["on"] = "holdout" if hold else "estimation (no holdout given)"
+    warns = []
+    if after["nrmse"] > before["nrmse"] * 1.05:
+        warns.append(
+            f"the augmented model is worse than the given one on the {before['on']} ({kind} error NRMSE "
+            f"{100 * before['nrmse']:.3g} % -> {100 * after['nrmse']:.3g} %): the data do not support "
+            f"its changes; keep the given model" + (" and treat the findings as unconfirmed" if findings else
+                                                    " (the re-calibration fitted the estimation data only)"))
     report = DiscoveryReport(findings, corrections, before, after, aug, model, location, selection,
-                             settings, series, identifiability)
+                             settings, series, identifiability, warns)
     finite = all(np.all(np.isfinite(np.asarray(getattr(aug, k)))) for k in
                  ("masses", "stiffness", "velocity_damping", "position_damping"))
     result = RESULTS.successful if finite else RESULTS.nonfinite
-    stats = {"findings": len(findings), "kind": kind, "form": form}
+    stats = {"findings": len(findings), "kind": kind, "form": form, "warnings": warns}
     return raise_if_failed(Solution(value=report, result=result, stats=stats), throw, "discover",
                            "the augmented model has non-finite coefficients")

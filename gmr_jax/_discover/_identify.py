@@ -111,19 +111,40 @@ def residualised(B: np.ndarray, X: np.ndarray) -> np.ndarray:
     return X - Q @ (Q.T @ X)
 
 
-def ambiguous(B: np.ndarray, Xc: np.ndarray, kept: list[int], labels: list[str]) -> list[tuple[int, int, float]]:
-    """Kept candidates that another candidate (kept or not) reproduces once the re-calibration
-    columns B are accounted for: (kept index, other index, partial correlation) with partial
-    R^2 >= 1 - 1/VIF_MAX. Such a term explains something, but these data cannot say which
-    physics it is (at one forcing frequency, quadratic drag beyond its viscous part and cubic
-    damping are both a third harmonic)."""
+def _rss(Z: np.ndarray, y: np.ndarray) -> float:
+    coef, *_ = np.linalg.lstsq(_unit(Z), y, rcond=1e-12)
+    r = y - _unit(Z) @ coef
+    return float(r @ r)
+
+
+def ambiguous(B: np.ndarray, Xc: np.ndarray, kept: list[int], y: np.ndarray, n_eff: float,
+              alpha: float = 0.05) -> list[tuple[int, int, float]]:
+    """Kept candidates the data do not prefer to a substitute: (kept index, substitute index,
+    partial correlation) where replacing the kept term by another candidate raises the residual
+    sum of squares by less than the F(1, n_eff) critical value at `alpha` times the residual
+    variance (n_eff: rows / integrated autocorrelation time). Such a term explains something,
+    but these data cannot say which physics it is: at one forcing frequency, quadratic drag
+    beyond its viscous part and cubic damping are both a third harmonic."""
+    from scipy.stats import f as f_dist
+
+    if not kept:
+        return []
+    full = np.concatenate([B, Xc[:, kept]], 1)
+    rss = _rss(full, y)
+    s2 = rss / max(n_eff - full.shape[1], 1.0)
+    crit = float(f_dist.ppf(1.0 - alpha, 1, max(n_eff - full.shape[1], 1.0)))
     R = _unit(residualised(B, Xc))
     out = []
-    for k in kept:
-        c = R.T @ R[:, k]
-        c[k] = 0.0
-        c[[j for j in kept if j != k]] = 0.0  # two kept terms are a joint fit, not a confusion
-        j = int(np.argmax(np.abs(c)))
-        if c[j] ** 2 >= 1.0 - 1.0 / VIF_MAX:
-            out.append((k, j, float(c[j])))
+    for pos, k in enumerate(kept):
+        best = None
+        for j in range(Xc.shape[1]):
+            if j in kept:
+                continue
+            swap = full.copy()
+            swap[:, B.shape[1] + pos] = Xc[:, j]
+            d = (_rss(swap, y) - rss) / max(s2, 1e-300)
+            if d < crit and (best is None or d < best[0]):
+                best = (d, j)
+        if best is not None:
+            out.append((k, best[1], float(R[:, k] @ R[:, best[1]])))
     return out

@@ -41,6 +41,8 @@ def summary(report) -> str:
             lines.append(f"  re-calibration, {_cell(report, c['dof'])}: {what} {_g(mv)} -> "
                          f"{_g(mv + c['coefficient'])} (correction {_g(c['coefficient'])}, 95 % CI "
                          f"{_g(lo)} to {_g(hi)})")
+    for w in report.warnings:
+        lines.append(f"  warning: {w}")
     for d in report.identifiability:
         if d.mass == "held":
             lines.append(f"  held, {_cell(report, d.dof)}: mass: {d.why}")

@@ -12,6 +12,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .._solution import RESULTS, Solution, error_if_failed
+from ._householder import back_substitute, householder_qr, inverse
 
 
 def _float_array(x):
@@ -64,8 +65,8 @@ def compress(theta: Float[Array, "samples terms"], y: Float[Array, " samples"], 
         n = jnp.sum(weights > 0).astype(theta.dtype)
     else:
         n = jnp.asarray(theta.shape[0], theta.dtype)
-    q, r = jnp.linalg.qr(theta, mode="reduced")
-    return QRData(r=r, z=q.T @ y, yy=jnp.sum(y**2), n=n)
+    r, z = householder_qr(theta, y)
+    return QRData(r=r, z=z, yy=jnp.sum(y**2), n=n)
 
 
 def column_norms(qr: QRData) -> Float[Array, " terms"]:
@@ -81,8 +82,8 @@ def masked_lstsq(r, z, mask, alpha):
     pin = jnp.where(mask, jnp.sqrt(alpha), 1.0)
     a = jnp.concatenate([rm, jnp.diag(pin)], axis=0)
     b = jnp.concatenate([z, jnp.zeros(p, z.dtype)])
-    q2, r2 = jnp.linalg.qr(a, mode="reduced")
-    c = jax.scipy.linalg.solve_triangular(r2, q2.T @ b, lower=False)
+    r2, qb = householder_qr(a, b)
+    c = back_substitute(r2, qb)
     return jnp.where(mask, c, 0.0)
 
 
@@ -166,7 +167,7 @@ def coefficient_covariance(qr: QRData, coef, support) -> Float[Array, "terms ter
     k = jnp.sum(support)
     sigma2 = rss / jnp.maximum(qr.n - k, 1.0)
     g = rn.T @ rn + jnp.diag(jnp.where(support, 0.0, 1.0))
-    ginv = jnp.linalg.inv(g)
+    ginv = inverse(g)
     ginv = jnp.where(support[:, None] & support[None, :], ginv, 0.0)
     return sigma2 * ginv / (norms[:, None] * norms[None, :])
 

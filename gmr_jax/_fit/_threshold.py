@@ -14,6 +14,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._solution import RESULTS, Solution
+from ._householder import householder_qr
 from ._stls import STLS, QRData, column_norms, compress, stls_qr
 
 
@@ -33,8 +34,8 @@ def _stack(blocks: QRData, keep) -> QRData:
     k, p, _ = blocks.r.shape
     r = jnp.where(keep[:, None, None], blocks.r, 0.0).reshape(k * p, p)
     z = jnp.where(keep[:, None], blocks.z, 0.0).reshape(k * p)
-    q2, r2 = jnp.linalg.qr(r, mode="reduced")
-    return QRData(r=r2, z=q2.T @ z, yy=jnp.sum(jnp.where(keep, blocks.yy, 0.0)), n=jnp.sum(jnp.where(keep, blocks.n, 0.0)))
+    r2, z2 = householder_qr(r, z)
+    return QRData(r=r2, z=z2, yy=jnp.sum(jnp.where(keep, blocks.yy, 0.0)), n=jnp.sum(jnp.where(keep, blocks.n, 0.0)))
 
 
 def _validation_sse(block: QRData, coef):
