@@ -2,7 +2,6 @@
 chain into the target configuration and verify it (README, "Actuation design")."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 

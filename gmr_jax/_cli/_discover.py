@@ -1,7 +1,6 @@
 """`gmr discover MODEL.json REC.npz [...] --holdout REC.npz [...] --out DIR` (contracts)."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 

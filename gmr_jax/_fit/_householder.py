@@ -16,8 +16,8 @@ from jaxtyping import Array, Float
 
 
 def householder_qr(
-    a: Float[Array, "m p"], b: Float[Array, "m *k"]
-) -> tuple[Float[Array, "p p"], Float[Array, "p *k"]]:
+    a: Float[Array, " m p"], b: Float[Array, " m *k"]
+) -> tuple[Float[Array, " p p"], Float[Array, " p *k"]]:
     """R and Q^T b of the thin QR a = Q R (m >= p): min ||b - a c|| = min ||Q^T b - R c|| over c
     (plus the part of b outside range(a)); b is a vector or a matrix of right-hand sides. R's
     diagonal may be negative (as LAPACK's)."""

@@ -159,7 +159,6 @@ def coefficient_covariance(qr: QRData, coef, support) -> Float[Array, "terms ter
 
     sigma² = RSS / (n - |S|). This assumes white residuals; with filtered derivatives the
     residuals are correlated and the intervals are optimistic (documented limitation)."""
-    p = qr.r.shape[1]
     norms = jnp.where(column_norms(qr) > 0, column_norms(qr), 1.0)
     rn = jnp.where(support[None, :], qr.r / norms[None, :], 0.0)
     resid = qr.r @ coef - qr.z

@@ -56,7 +56,6 @@ def tristable_nes() -> System:
     real = np.sort(roots[np.abs(roots.imag) < 1e-12].real)
     stable = real[dpoly(real) > 0]
     span = stable.max() - stable.min()
-    centre = 0.5 * (stable.max() + stable.min())
     return System(
         name="nes",
         truth=from_terms([NES_MASS], terms),
