@@ -76,3 +76,9 @@ def check_real(value, name: str, *, lo: float | None = None, hi: float | None = 
         raise GMRInputError(f"{name} must be {'>' if lo_open else '>='} {lo:g}, got {describe(value)}{tail}")
     if hi is not None and np.any(arr >= hi if hi_open else arr > hi):
         raise GMRInputError(f"{name} must be {'<' if hi_open else '<='} {hi:g}, got {describe(value)}{tail}")
+
+
+class GMRDataWarning(UserWarning):
+    """The data or the model reconstructed from them break a physical assumption of GMR
+    (small vibrations about distinct stable equilibria, inputs recorded, bounded restoring
+    force); the model was built but should not be trusted without a look."""

@@ -4,8 +4,10 @@ the fix, exit 2 (input) or 1 (computation), never a traceback, never exit 0 with
 `CASES` is the table; `table()` returns (id, exit status, message) for the results index
 (`python studies/bad_inputs_table.py`)."""
 
+import atexit
 import json
 import re
+import shutil
 import tempfile
 from contextlib import redirect_stderr, redirect_stdout
 from functools import lru_cache
@@ -22,6 +24,7 @@ from gmr_jax._cli._main import main
 def files() -> dict:
     """A small, valid set of inputs made by hand (a chain model, an independent model, recordings)."""
     d = Path(tempfile.mkdtemp(prefix="gmr_bad_cli_"))
+    atexit.register(shutil.rmtree, d, True)  # the files outlive one test (cached), not the process
     terms = []
     for i, (k1, k3) in enumerate([(-30.0, 1e5), (-60.0, 2e5)]):
         terms += [{"dof": i, "physics": "stiffness", "order": 1, "coefficient": k1},

@@ -68,3 +68,66 @@ def test_add_noise_snr():
     s = 5.0 + np.sin(np.linspace(0, 100, 100000))
     n = g.add_noise(s, 20.0, rng) - s
     assert abs(10 * np.log10(np.var(s) / np.var(n)) - 20.0) < 0.1
+
+
+def _sweep_file(tmp_path, t, name="lab.npz"):
+    """A lab-style file: samples taken uniformly at 1 kHz, stamped as given by `t`."""
+    k = np.arange(t.size)
+    x = 1e-3 * np.sin(2 * np.pi * 3 * k * 1e-3)[:, None]
+    p = tmp_path / name
+    np.savez(p, t=t, x=x, base_acc=np.sin(k * 1e-3))
+    return p, x
+
+
+def test_float32_time_stamps_are_put_on_the_uniform_grid(tmp_path):
+    """A 100 s record with float32 stamps (rounded to 8e-6 s, 0.8 % of a step) is the uniform
+    record it is; the channels are untouched."""
+    k = np.arange(100_000)
+    p, x = _sweep_file(tmp_path, (k * 1e-3).astype(np.float32))
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = g.load_recording(p)
+    assert r.t.dtype == np.float64
+    np.testing.assert_allclose(np.diff(r.t), 1e-3, rtol=1e-6)
+    np.testing.assert_array_equal(r.x, x)
+
+
+def test_small_jitter_is_snapped_and_larger_jitter_resampled_with_a_warning(tmp_path):
+    k = np.arange(5000)
+    jitter = np.random.default_rng(0).uniform(-1, 1, k.size)
+    # 4e-5 of a step (the EMPS files' stamps): uniform sampling, put on the grid silently
+    p, x = _sweep_file(tmp_path, (k + 4e-5 * jitter) * 1e-3)
+    r = g.load_recording(p)
+    np.testing.assert_allclose(r.t, k * 1e-3, atol=1e-9)
+    np.testing.assert_array_equal(r.x, x)
+    # 5 % of a step: the samples were taken at the stamped times; resampled onto the grid
+    tj = (k + 0.05 * jitter) * 1e-3
+    p = tmp_path / "j.npz"
+    np.savez(p, t=tj, x=1e-3 * np.sin(2 * np.pi * 3 * tj)[:, None], base_acc=np.sin(tj))
+    with pytest.warns(g.GMRDataWarning, match="resampled linearly onto the uniform grid"):
+        r = g.load_recording(p)
+    np.testing.assert_allclose(np.diff(r.t), np.diff(r.t).mean(), rtol=1e-9)
+    np.testing.assert_allclose(r.x[:, 0], 1e-3 * np.sin(2 * np.pi * 3 * r.t), atol=1e-3 * 1e-3)
+    # a missing sample is a gap, not jitter: refused with the tolerances named
+    tg = np.delete(k * 1e-3, 2500)
+    p = tmp_path / "gap.npz"
+    np.savez(p, t=tg, x=np.sin(tg)[:, None], base_acc=np.sin(tg))
+    with pytest.raises(g.GMRInputError, match=r"not uniformly sampled.*0.001 of a step is accepted"):
+        g.load_recording(p)
+
+
+def test_cli_prints_load_time_warnings_and_keeps_them(tmp_path, capsys):
+    """`gmr fit`/`discover`/`refine` load through this: the resampling warning is a `warning:` line
+    (and `gmr fit` writes it into the model's "warnings")."""
+    from gmr_jax._cli._args import load_recordings
+
+    k = np.arange(3000)
+    tj = (k + 0.05 * np.random.default_rng(1).uniform(-1, 1, k.size)) * 1e-3
+    p = tmp_path / "jittered.npz"
+    np.savez(p, t=tj, x=np.sin(2 * np.pi * 3 * tj)[:, None], base_acc=np.sin(tj))
+    recs, msgs = load_recordings([p, p])
+    assert len(recs) == 2 and len(msgs) == 2 and "resampled linearly" in msgs[0]
+    err = capsys.readouterr().err
+    assert err.count("warning: ") == 2 and "jittered.npz: time stamps deviate" in err

@@ -1,11 +1,13 @@
 """Argument types and checks shared by the `gmr` subcommands (each names the option and the fix)."""
 
 import argparse
+import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-from .._errors import GMRInputError
+from .._errors import GMRDataWarning, GMRInputError
 
 
 def positive_int(s):
@@ -135,6 +137,7 @@ def find_wells(model, spec, model_path=None):
     import json
 
     import gmr_jax as gmr
+
     from .._basins._wells import pad_wells, polynomial_wells
 
     d = model.n_dof
@@ -195,3 +198,20 @@ def start_configuration(spec, wells):
         raise GMRInputError(f"--start {spec!r}: need {wells.shape[0]} well indices, each below that DOF's "
                             f"number of wells {n_wells.tolist()}")
     return np.array([wells[i, k] for i, k in enumerate(idx)])
+
+
+def load_recordings(paths) -> tuple[list, list[str]]:
+    """Load recording files; their load-time data warnings (time stamps resampled onto a uniform
+    grid) are printed as `warning:` lines and returned, for the output file's metadata."""
+    from .._recordings._recording import load_recording
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", GMRDataWarning)
+        recs = [load_recording(p) for p in paths]
+    msgs = [str(w.message) for w in caught if issubclass(w.category, GMRDataWarning)]
+    for w in caught:
+        if not issubclass(w.category, GMRDataWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    for m in msgs:
+        print(f"warning: {m}", file=sys.stderr)
+    return recs, msgs

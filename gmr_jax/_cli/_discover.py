@@ -5,7 +5,7 @@ import json
 import numpy as np
 
 from .._errors import GMRInputError
-from ._args import output_dir
+from ._args import load_recordings, output_dir
 
 
 def register(sub):
@@ -57,8 +57,8 @@ def run(args) -> int:
         raise GMRInputError(f"--decimate must be >= 1, got {args.decimate}")
     out = output_dir(args.out)
     model = gmr.load_model(args.model)
-    recs = [gmr.load_recording(p) for p in args.recordings]
-    hold = [gmr.load_recording(p) for p in args.holdout]
+    recs = load_recordings(args.recordings)[0]
+    hold = load_recordings(args.holdout)[0]
     rule = gmr.SelectionRule(alpha=args.alpha, n_boot=args.n_boot)
     rep = gmr.discover(model, recs, hold, rule=rule, form=args.form, decimate=args.decimate, error=args.error,
                        refit_masses=args.refit_masses).value

@@ -12,7 +12,7 @@ import numpy as np
 
 from .._errors import GMRInputError
 from .._reconstruct._sanity import GMRDataWarning
-from ._args import positive_int
+from ._args import load_recordings, positive_int
 
 
 def register(sub):
@@ -45,7 +45,7 @@ def data_range(recs):
 def run(args) -> int:
     import gmr_jax as gmr
 
-    recs = [gmr.load_recording(p) for p in args.recordings]
+    recs, load_warnings = load_recordings(args.recordings)
     lib = gmr.Library(args.restoring_order, args.damping_order,
                       velocity_damping=not args.no_velocity_damping,
                       position_damping=not args.no_position_damping)
@@ -71,7 +71,7 @@ def run(args) -> int:
     model, st = sol.value, sol.stats
     gmr.save_model(model, args.out, method=st["method"],
                    library={"r": lib.restoring_order, "d": lib.damping_order}, training=st["training"],
-                   warnings=list(st["warnings"]), data_range=data_range(recs))
+                   warnings=load_warnings + list(st["warnings"]), data_range=data_range(recs))
     print(f"{st['method']} model from {len(recs)} recording(s) -> {args.out}")
     for line in model.equations():
         print("  " + line)
@@ -85,8 +85,9 @@ def run(args) -> int:
         print("  note: velocities/accelerations were estimated from x (Savitzky-Golay, see README)")
     for w in st["warnings"]:
         print(f"warning: {w}", file=sys.stderr)
-    if st["warnings"] and args.strict:
-        print(f"gmr fit: {len(st['warnings'])} warning(s) with --strict: exit status 3 (model written to "
+    n_warn = len(load_warnings) + len(st["warnings"])
+    if n_warn and args.strict:
+        print(f"gmr fit: {n_warn} warning(s) with --strict: exit status 3 (model written to "
               f"{args.out})", file=sys.stderr)
         return 3
     return 0

@@ -3,7 +3,7 @@
 import numpy as np
 
 from .._errors import GMRInputError
-from ._args import output_file
+from ._args import load_recordings, output_file
 
 
 def register(sub):
@@ -39,8 +39,8 @@ def run(args) -> int:
         raise GMRInputError(f"--window must be a positive number of seconds, got {args.window}")
     output_file(args.out)
     model = gmr.load_model(args.model)
-    train = [gmr.load_recording(p) for p in args.recordings]
-    hold = [gmr.load_recording(p) for p in args.holdout] if args.holdout else None
+    train = load_recordings(args.recordings)[0]
+    hold = load_recordings(args.holdout)[0] if args.holdout else None
     solver = (optx.LevenbergMarquardt(rtol=1e-6, atol=1e-8) if args.solver == "lm"
               else optx.GaussNewton(rtol=1e-6, atol=1e-8))
     settings = gmr.RefineSettings(window=args.window, solver=solver, max_iterations=args.max_iterations,

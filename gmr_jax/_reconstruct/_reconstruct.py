@@ -356,6 +356,10 @@ def reconstruct(
         amps = [max(_sanity.vibration_amplitude(xcol[k]) for k in grp) for grp in groups]
         warnings += _sanity.check_global_shape(i, np.asarray(g.stiffness), eq, amps,
                                                local_k if k1 is not None else np.zeros(len(groups)))
+        n_k = g.stiffness.shape[0]
+        xall = np.concatenate(xcol)
+        warnings += _sanity.check_determination(i, np.asarray(g.stiffness), np.asarray(coord.aux)[:n_k, :n_k],
+                                                float(xall.min()), float(xall.max()))
         se = split_flat(jnp.sqrt(jnp.clip(jnp.diag(coord.aux), 0.0)), g)
         stiff.append(np.asarray(g.stiffness)), vdamp.append(np.asarray(g.velocity_damping))
         pdamp.append(np.asarray(g.position_damping))

@@ -3,12 +3,13 @@
 import csv
 import io
 import os
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from .._errors import GMRInputError, describe, is_tracer
+from .._errors import GMRDataWarning, GMRInputError, describe, is_tracer
 from .._topology import as_topology
 from ._derivatives import differentiate
 
@@ -219,12 +220,68 @@ def validate(rec: Recording, src: str = "recording", min_samples: int = MIN_SAMP
     if np.any(dt <= 0):
         i = int(np.argmax(dt <= 0))
         raise GMRInputError(f"{src}: 't' is not strictly increasing (at sample {i + 1})")
-    if np.max(np.abs(dt - dt.mean())) > 1e-6 * dt.mean() + 1e-12:
-        raise GMRInputError(
-            f"{src}: time is not uniformly sampled (steps from {dt.min():.3g} to {dt.max():.3g} s); "
-            f"resample onto a uniform grid first"
-        )
+    out = _uniform_time(out, _stamp_resolution(rec.t, t), src)
     return replace(rec, **out)
+
+
+#: Time stamps within this fraction of a step of a uniform grid are put on the grid silently
+#: (the sampling is uniform, the stamps are rounded: a logger's clock, a float32 column).
+SNAP_JITTER = 1e-3
+#: Up to this fraction of a step, the channels are resampled onto the uniform grid (with a
+#: GMRDataWarning); beyond it the record has gaps or a changing rate and is refused.
+RESAMPLE_JITTER = 0.25
+
+
+def _stamp_resolution(t_raw, t):
+    """The rounding unit of the stored time stamps: a few ulps of their dtype at max |t|
+    (float32 stamps of a 100 s record are only good to 8e-6 s)."""
+    dtype = np.asarray(t_raw).dtype
+    eps = np.finfo(dtype).eps if dtype.kind == "f" else np.finfo(float).eps
+    return 4.0 * eps * float(np.max(np.abs(t)))
+
+
+def _uniform_time(out: dict, resolution: float, src: str) -> dict:
+    """Put `t` on the uniform grid t0 + k * step (the least-squares line through the stamps).
+
+    Stamps off the grid by at most max(SNAP_JITTER * step, the stamps' own rounding) are
+    replaced by the grid (nothing else changes); up to RESAMPLE_JITTER * step, every channel
+    is interpolated (linearly) onto the grid and a GMRDataWarning says so; beyond that the
+    record is refused."""
+    t = out["t"]
+    n = t.shape[0]
+    dt = np.diff(t)
+    if np.max(np.abs(dt - dt.mean())) <= 1e-6 * dt.mean() + 1e-12:
+        return out  # uniform already (to rounding): the stamps are kept as given
+    k = np.arange(n) - 0.5 * (n - 1)
+    step = float(k @ (t - t.mean()) / (k @ k))  # least-squares line through the stamps
+    grid = t.mean() + step * k
+    dev = float(np.max(np.abs(t - grid)))
+    if dev <= max(SNAP_JITTER * step, resolution) and dt.min() > 0.5 * step:
+        return {**out, "t": grid}
+    if dev <= RESAMPLE_JITTER * step and dt.min() > 0.5 * step and dt.max() < 1.5 * step:
+        warnings.warn(
+            f"{src}: time stamps deviate from a uniform grid by up to {dev / step:.2g} of a step "
+            f"(steps {dt.min():.4g} to {dt.max():.4g} s); every channel was resampled linearly onto "
+            f"the uniform grid of step {step:.4g} s",
+            GMRDataWarning,
+            stacklevel=4,
+        )
+        res = {"t": grid}
+        for key, val in out.items():
+            if key == "t":
+                continue
+            if key == "masses":
+                res[key] = val
+            elif val.ndim == 1:
+                res[key] = np.interp(grid, t, val)
+            else:
+                res[key] = np.stack([np.interp(grid, t, val[:, k]) for k in range(val.shape[1])], 1)
+        return res
+    raise GMRInputError(
+        f"{src}: time is not uniformly sampled (steps from {dt.min():.3g} to {dt.max():.3g} s, "
+        f"stamps up to {dev / step:.2g} of a step off a uniform grid; up to {SNAP_JITTER:g} of a step "
+        f"is accepted as is, up to {RESAMPLE_JITTER:g} resampled); resample onto a uniform grid first"
+    )
 
 
 def save_recording(rec: Recording, path) -> None:
