@@ -131,3 +131,51 @@ def test_cli_prints_load_time_warnings_and_keeps_them(tmp_path, capsys):
     assert len(recs) == 2 and len(msgs) == 2 and "resampled linearly" in msgs[0]
     err = capsys.readouterr().err
     assert err.count("warning: ") == 2 and "jittered.npz: time stamps deviate" in err
+
+
+def test_lab_files_with_a_column_mapping(tmp_path):
+    """.mat (scipy.io), NPZ and CSV with the lab's own names and scale factors (EMPS: force = gtau * vir,
+    column vectors (N, 1), a scalar gain): the same recording from each."""
+    import scipy.io
+
+    k = np.arange(2000)
+    t = k * 1e-3
+    qm = 0.1 * np.sin(2 * np.pi * 2 * t)
+    vir = np.cos(2 * np.pi * 2 * t)
+    lab = {"t": t[:, None], "qm": qm[:, None], "vir": vir[:, None], "gtau": np.array([[35.15]])}
+    scipy.io.savemat(tmp_path / "run.mat", lab)
+    np.savez(tmp_path / "run.npz", **lab)
+    (tmp_path / "run.csv").write_text("time,qm,vir\n" + "\n".join(f"{a:.17g},{b:.17g},{c:.17g}" for a, b, c in zip(t, qm, vir)))
+    mapping = {"x": "qm", "force": "gtau*vir"}
+    for name, cols in (("run.mat", mapping), ("run.npz", mapping),
+                       ("run.csv", {"t": "time", "x": "qm*1000/1000", "force": "35.15*vir"})):
+        r = g.load_recording(tmp_path / name, cols)
+        np.testing.assert_allclose(r.t, t, rtol=1e-15, atol=0)
+        np.testing.assert_allclose(r.x[:, 0], qm, rtol=1e-14)
+        np.testing.assert_allclose(r.force[:, 0], 35.15 * vir, rtol=1e-14)
+    # two DOFs, one expression each
+    r = g.load_recording(tmp_path / "run.npz", {"x": ["qm", "2*qm"], "force": ["vir", "vir"]})
+    assert r.x.shape == (2000, 2) and np.allclose(r.x[:, 1], 2 * qm)
+    # what goes wrong says what the file has
+    with pytest.raises(g.GMRInputError, match=r"no 'x': the file has \['gtau', 'qm', 't', 'vir'\]"):
+        g.load_recording(tmp_path / "run.mat")
+    with pytest.raises(g.GMRInputError, match="'vr' is neither a variable of the file nor a number"):
+        g.load_recording(tmp_path / "run.mat", {"x": "qm", "force": "gtau*vr"})
+    with pytest.raises(g.GMRInputError, match="unknown field"):
+        g.load_recording(tmp_path / "run.mat", {"x": "qm", "forcing": "vir"})
+    with pytest.raises(g.GMRInputError, match="single number for 'force'"):
+        g.load_recording(tmp_path / "run.mat", {"x": "qm", "force": "gtau"})
+    (tmp_path / "junk.mat").write_bytes(b"MATLAB 5.0 junk" * 20)
+    with pytest.raises(g.GMRInputError, match="cannot read as a MATLAB .mat file"):
+        g.load_recording(tmp_path / "junk.mat")
+
+
+def test_cli_columns_option():
+    from gmr_jax._cli._args import columns
+
+    assert columns("x=qm, force=gtau*vir") == {"x": "qm", "force": "gtau*vir"}
+    assert columns("x=q1*1e-3;q2*1e-3") == {"x": ["q1*1e-3", "q2*1e-3"]}
+    assert columns(None) is None
+    for bad in ("x", "=qm", "x=", ","):
+        with pytest.raises(g.GMRInputError, match="--columns"):
+            columns(bad)

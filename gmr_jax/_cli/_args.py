@@ -200,14 +200,41 @@ def start_configuration(spec, wells):
     return np.array([wells[i, k] for i, k in enumerate(idx)])
 
 
-def load_recordings(paths) -> tuple[list, list[str]]:
-    """Load recording files; their load-time data warnings (time stamps resampled onto a uniform
-    grid) are printed as `warning:` lines and returned, for the output file's metadata."""
+COLUMNS_HELP = ("map the recording's fields to the file's variables, as the lab stored them: "
+                "'x=qm,force=gtau*vir' (names and numbers joined by * or /; one DOF per ';': "
+                "'x=q1*1e-3;q2*1e-3'); needed for .mat/.npz/.csv files whose names are not t, x, ...")
+
+
+def add_columns_option(parser) -> None:
+    parser.add_argument("--columns", default=None, metavar="FIELD=EXPR,...", help=COLUMNS_HELP)
+
+
+def columns(spec):
+    """'x=qm,force=gtau*vir' -> {"x": "qm", "force": "gtau*vir"}; ';' separates DOFs."""
+    if spec is None:
+        return None
+    out = {}
+    for item in filter(None, (p.strip() for p in spec.split(","))):
+        field, eq, expr = item.partition("=")
+        if not eq or not field.strip() or not expr.strip():
+            raise GMRInputError(f"--columns: {item!r} is not FIELD=EXPR (e.g. --columns x=qm,force=gtau*vir)")
+        parts = [e.strip() for e in expr.split(";")]
+        out[field.strip()] = parts if len(parts) > 1 else parts[0]
+    if not out:
+        raise GMRInputError("--columns is empty; e.g. --columns x=qm,force=gtau*vir")
+    return out
+
+
+def load_recordings(paths, column_spec=None) -> tuple[list, list[str]]:
+    """Load recording files (mapped by `--columns` if given); their load-time data warnings
+    (time stamps resampled onto a uniform grid) are printed as `warning:` lines and returned, for
+    the output file's metadata."""
     from .._recordings._recording import load_recording
 
+    mapping = columns(column_spec)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", GMRDataWarning)
-        recs = [load_recording(p) for p in paths]
+        recs = [load_recording(p, mapping) for p in paths]
     msgs = [str(w.message) for w in caught if issubclass(w.category, GMRDataWarning)]
     for w in caught:
         if not issubclass(w.category, GMRDataWarning):

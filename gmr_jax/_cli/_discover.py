@@ -5,7 +5,7 @@ import json
 import numpy as np
 
 from .._errors import GMRInputError
-from ._args import load_recordings, output_dir
+from ._args import add_columns_option, load_recordings, output_dir
 
 
 def register(sub):
@@ -14,6 +14,7 @@ def register(sub):
     p.add_argument("recordings", nargs="+", help="estimation recordings (NPZ or CSV)")
     p.add_argument("--holdout", nargs="+", default=[], help="recordings used only to measure the fit before/after")
     p.add_argument("--out", required=True, help="output folder: report.json, augmented_model.json, summary.txt, figures")
+    add_columns_option(p)
     p.add_argument("--form", choices=["auto", "strong", "weak"], default="auto",
                    help="equation-error form (weak: test-function integrals, no acceleration; auto: weak when a is estimated)")
     p.add_argument("--error", choices=["auto", "output", "equation"], default="auto",
@@ -57,8 +58,8 @@ def run(args) -> int:
         raise GMRInputError(f"--decimate must be >= 1, got {args.decimate}")
     out = output_dir(args.out)
     model = gmr.load_model(args.model)
-    recs = load_recordings(args.recordings)[0]
-    hold = load_recordings(args.holdout)[0]
+    recs = load_recordings(args.recordings, args.columns)[0]
+    hold = load_recordings(args.holdout, args.columns)[0]
     rule = gmr.SelectionRule(alpha=args.alpha, n_boot=args.n_boot)
     rep = gmr.discover(model, recs, hold, rule=rule, form=args.form, decimate=args.decimate, error=args.error,
                        refit_masses=args.refit_masses).value

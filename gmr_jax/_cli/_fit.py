@@ -12,13 +12,14 @@ import numpy as np
 
 from .._errors import GMRInputError
 from .._reconstruct._sanity import GMRDataWarning
-from ._args import load_recordings, positive_int
+from ._args import add_columns_option, load_recordings, positive_int
 
 
 def register(sub):
     f = sub.add_parser("fit", help="reconstruct a global model from recordings (one per equilibrium)")
-    f.add_argument("recordings", nargs="+", help="NPZ or CSV recordings")
+    f.add_argument("recordings", nargs="+", help="NPZ, CSV or MATLAB .mat recordings")
     f.add_argument("--out", required=True, help="model JSON to write (gmr-model/1)")
+    add_columns_option(f)
     f.add_argument("--method", choices=["gmr", "gmc-sindy"], default="gmr")
     f.add_argument("--restoring-order", "-r", type=positive_int, default=5)
     f.add_argument("--damping-order", "-d", type=positive_int, default=5)
@@ -45,7 +46,7 @@ def data_range(recs):
 def run(args) -> int:
     import gmr_jax as gmr
 
-    recs, load_warnings = load_recordings(args.recordings)
+    recs, load_warnings = load_recordings(args.recordings, args.columns)
     lib = gmr.Library(args.restoring_order, args.damping_order,
                       velocity_damping=not args.no_velocity_damping,
                       position_damping=not args.no_position_damping)

@@ -3,7 +3,7 @@
 import numpy as np
 
 from .._errors import GMRInputError
-from ._args import load_recordings, output_file
+from ._args import add_columns_option, load_recordings, output_file
 
 
 def register(sub):
@@ -12,6 +12,7 @@ def register(sub):
     r.add_argument("model", help="gmr-model/1 JSON (e.g. from gmr fit)")
     r.add_argument("recordings", nargs="+", help="training recordings (NPZ or CSV)")
     r.add_argument("--out", required=True, help="refined model JSON to write (gmr-model/1)")
+    add_columns_option(r)
     r.add_argument("--holdout", nargs="+", default=None, help="recordings to report the output error on")
     r.add_argument("--free", default="all", help="coefficients to fit: all (every nonzero term; default), "
                    "stiffness, damping, velocity_damping, position_damping, or a comma-separated list")
@@ -39,8 +40,8 @@ def run(args) -> int:
         raise GMRInputError(f"--window must be a positive number of seconds, got {args.window}")
     output_file(args.out)
     model = gmr.load_model(args.model)
-    train = load_recordings(args.recordings)[0]
-    hold = load_recordings(args.holdout)[0] if args.holdout else None
+    train = load_recordings(args.recordings, args.columns)[0]
+    hold = load_recordings(args.holdout, args.columns)[0] if args.holdout else None
     solver = (optx.LevenbergMarquardt(rtol=1e-6, atol=1e-8) if args.solver == "lm"
               else optx.GaussNewton(rtol=1e-6, atol=1e-8))
     settings = gmr.RefineSettings(window=args.window, solver=solver, max_iterations=args.max_iterations,

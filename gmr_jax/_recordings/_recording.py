@@ -304,7 +304,8 @@ def save_recording(rec: Recording, path) -> None:
     np.savez(path, **data)
 
 
-def _read_csv(path: Path, src: str) -> Recording:
+def _read_csv(path: Path, src: str, raw: bool = False):
+    """The recording in a CSV file; with `raw`, every column by its header name (for a mapping)."""
     try:
         text = path.read_text(encoding="utf-8-sig")  # a byte-order mark (Windows editors) is not a column
     except UnicodeDecodeError:
@@ -321,8 +322,8 @@ def _read_csv(path: Path, src: str) -> Recording:
             return True
         return any(h.startswith(p) and h[len(p):].isdigit() for p in ("x", "v", "a", "f"))
 
-    unknown = [h for h in header if not known(h)]
-    if unknown or "t" not in header or "x0" not in header:
+    unknown = [] if raw else [h for h in header if not known(h)]
+    if unknown or (not raw and ("t" not in header or "x0" not in header)):
         what = f"unknown column(s) {unknown}" if unknown else "missing column 't' or 'x0'"
         raise GMRInputError(f"{src}: {what}; found columns {header}, expected {expected} "
                             f"(the first line must be this header)")
@@ -352,6 +353,8 @@ def _read_csv(path: Path, src: str) -> Recording:
                 raise GMRInputError(f"{src}: line {line_no} (sample {j}), column '{header[c]}': {cell.strip()!r} "
                                     f"is not a number; fix or remove that row") from None
     col = {h: data[:, i] for i, h in enumerate(header)}
+    if raw:
+        return col
 
     def group(pre):
         idx = sorted(int(h[len(pre):]) for h in header if h.startswith(pre) and h[len(pre):].isdigit())
@@ -367,7 +370,8 @@ def _read_csv(path: Path, src: str) -> Recording:
                      base_acc=col.get("base_acc"), force=group("f"), name=path.stem)
 
 
-def _read_npz(path: Path, src: str) -> Recording:
+def _read_npz(path: Path, src: str, raw: bool = False):
+    """The recording in an NPZ file; with `raw`, every array by its name (for a mapping)."""
     fix = "save it with np.savez(path, t=t, x=x, ...) or gmr_jax.save_recording"
     try:
         z = np.load(path, allow_pickle=False)
@@ -378,8 +382,8 @@ def _read_npz(path: Path, src: str) -> Recording:
         raise GMRInputError(f"{src}: holds a single array (.npy), not named arrays; {fix}")
     with z:
         found = sorted(z.files)
-        unknown = [k for k in found if k not in SIGNALS]
-        if unknown or "t" not in found or "x" not in found:
+        unknown = [] if raw else [k for k in found if k not in SIGNALS]
+        if unknown or (not raw and ("t" not in found or "x" not in found)):
             what = f"unknown array(s) {unknown}" if unknown else "missing 't' or 'x'"
             raise GMRInputError(f"{src}: NPZ needs arrays 't' and 'x' (optional v, a, base_acc, force, masses); "
                                 f"{what}; found {found}")
@@ -392,12 +396,19 @@ def _read_npz(path: Path, src: str) -> Recording:
                                     f"loaded; store it as a float array, {fix}") from None
             except Exception as e:  # noqa: BLE001 - a damaged member
                 raise GMRInputError(f"{src}: cannot read array '{k}' ({type(e).__name__}); {fix}") from None
+    if raw:
+        return arrays
     return Recording(**arrays, name=path.stem)
 
 
-def load_recording(path) -> Recording:
-    """Read and validate a recording (NPZ with keys t, x, [v, a, base_acc, force, masses], or
-    CSV with a header row t, x0.., v0.., a0.., base_acc or f0..).
+def load_recording(path, columns: dict | None = None) -> Recording:
+    """Read and validate a recording (NPZ with keys t, x, [v, a, base_acc, force, masses], CSV
+    with a header row t, x0.., v0.., a0.., base_acc or f0.., or MATLAB .mat with the NPZ's names).
+
+    `columns` maps the recording's fields to the file's own variables as a lab stored them, each a
+    product/quotient of variable names and numbers, or a list of those (one per DOF):
+    `{"x": "qm", "force": "gtau*vir"}` (EMPS), `{"t": "time", "x": ["q1*1e-3", "q2*1e-3"]}`.
+    Fields not mapped are read by their own names where the file has them.
 
     `path` is a str or `os.PathLike`. Anything else, a missing or empty file, a directory, an
     unreadable or object (pickled) array, an unknown or missing key/column, a non-numeric cell,
@@ -419,7 +430,15 @@ def load_recording(path) -> Recording:
     if empty:
         raise GMRInputError(f"{src}: the file is empty (0 bytes)")
     try:
-        rec = _read_csv(path, src) if path.suffix.lower() == ".csv" else _read_npz(path, src)
+        suffix = path.suffix.lower()
+        if columns is not None or suffix == ".mat":
+            from ._mapping import map_columns, read_mat
+
+            raw = (_read_csv(path, src, raw=True) if suffix == ".csv" else read_mat(path, src) if suffix == ".mat"
+                   else _read_npz(path, src, raw=True))
+            rec = Recording(**map_columns(raw, columns, src), name=path.stem)
+        else:
+            rec = _read_csv(path, src) if suffix == ".csv" else _read_npz(path, src)
     except OSError as e:
         raise GMRInputError(f"{src}: cannot read ({e.strerror or type(e).__name__})") from None
     except GMRInputError as e:  # the Recording's own checks name it by its stem: use the path

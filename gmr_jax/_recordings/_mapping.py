@@ -1,0 +1,93 @@
+"""Recordings as labs store them: MATLAB files and a mapping from the recording's fields to the
+file's own variables (names, units, scale factors), e.g. EMPS: `x = qm`, `force = gtau * vir`."""
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from .._errors import GMRInputError
+
+#: The recording's fields a mapping may set (as `Recording`).
+FIELDS = ("t", "x", "v", "a", "base_acc", "force", "masses")
+_TOKEN = re.compile(r"\s*([*/])\s*")
+
+
+def read_mat(path: Path, src: str) -> dict:
+    """Every numeric variable of a MATLAB v4-v7.2 file (scipy.io), squeezed: (N, 1) -> (N,)."""
+    import scipy.io
+
+    try:
+        raw = scipy.io.loadmat(path, squeeze_me=False)
+    except NotImplementedError:
+        raise GMRInputError(f"{src}: a MATLAB v7.3 (HDF5) file, which is not read; save it with "
+                            f"save(..., '-v7') or export the channels to .npz/.csv") from None
+    except Exception as e:  # noqa: BLE001 - any unreadable file is a user error here
+        raise GMRInputError(f"{src}: cannot read as a MATLAB .mat file ({type(e).__name__}: {e})") from None
+    out = {}
+    for k, v in raw.items():
+        if k.startswith("__") or not isinstance(v, np.ndarray) or v.dtype.kind not in "fiu":
+            continue
+        v = np.asarray(v, float)
+        out[k] = v.reshape(()) if v.size == 1 else v.reshape(-1) if v.ndim == 2 and 1 in v.shape else v
+    return out
+
+
+def _evaluate(expr: str, variables: dict, field: str, src: str):
+    parts = _TOKEN.split(expr.strip())
+    if not expr.strip() or len(parts) % 2 == 0:
+        raise GMRInputError(f"{src}: column mapping {field}={expr!r}: write names and numbers joined by * or /")
+    value, op = None, "*"
+    for i, tok in enumerate(parts):
+        if i % 2:
+            op = tok
+            continue
+        if tok in variables:
+            term = np.asarray(variables[tok], float)
+            if term.size == 1:
+                term = term.reshape(())  # a gain stored as a 1x1 matrix
+            elif term.ndim == 2 and 1 in term.shape:
+                term = term.reshape(-1)
+        else:
+            try:
+                term = np.asarray(float(tok))
+            except ValueError:
+                raise GMRInputError(f"{src}: column mapping {field}={expr!r}: {tok!r} is neither a variable of the "
+                                    f"file nor a number; the file has {sorted(variables)}") from None
+        value = term if value is None else (value * term if op == "*" else value / term)
+    return value
+
+
+def map_columns(variables: dict, columns: dict | None, src: str) -> dict:
+    """The recording's fields from the file's variables: `columns[field]` is an expression (or a
+    list of expressions, one per DOF); unmapped fields are taken by their own name if present."""
+    columns = dict(columns or {})
+    bad = sorted(set(columns) - set(FIELDS))
+    if bad:
+        raise GMRInputError(f"{src}: column mapping names unknown field(s) {bad}; the fields are {list(FIELDS)}")
+    out = {}
+    for field in FIELDS:
+        if field in columns:
+            spec = columns[field]
+            if isinstance(spec, (list, tuple)):
+                vals = [_evaluate(str(e), variables, field, src) for e in spec]
+                try:
+                    out[field] = np.stack(np.broadcast_arrays(*vals), axis=1)
+                except ValueError:
+                    raise GMRInputError(f"{src}: column mapping for '{field}': the DOFs' columns have different "
+                                        f"lengths {[np.shape(v) for v in vals]}") from None
+            else:
+                out[field] = _evaluate(str(spec), variables, field, src)
+        elif field in variables:
+            out[field] = variables[field]
+        if field in ("t", "base_acc", "masses") and np.ndim(out.get(field)) == 2 and 1 in np.shape(out[field]):
+            out[field] = np.reshape(out[field], -1)  # a stored column or row vector
+    for need in ("t", "x"):
+        if need not in out:
+            raise GMRInputError(f"{src}: no '{need}': the file has {sorted(variables)}; map one, e.g. "
+                                f"columns={{'{need}': '<name>'}} (CLI: --columns {need}=<name>)")
+    n = np.shape(out["t"])[0] if np.ndim(out["t"]) else 0
+    for field, val in out.items():  # a scalar scale alone (e.g. force=gtau) is a mistake, not a signal
+        if field != "masses" and np.ndim(val) == 0:
+            raise GMRInputError(f"{src}: column mapping gives a single number for '{field}', not {n} samples")
+    return out
