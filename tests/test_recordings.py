@@ -165,6 +165,11 @@ def test_lab_files_with_a_column_mapping(tmp_path):
         g.load_recording(tmp_path / "run.mat", {"x": "qm", "forcing": "vir"})
     with pytest.raises(g.GMRInputError, match="single number for 'force'"):
         g.load_recording(tmp_path / "run.mat", {"x": "qm", "force": "gtau"})
+    # a MATLAB v7.3 file (HDF5 behind a 128-byte header with version 0x0200): named, with the fix
+    header = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Mon Nov 23 2026 HDF5 schema 1.00 .".ljust(116)
+    (tmp_path / "v73.mat").write_bytes(header + b" " * 8 + b"\x00\x02" + b"IM" + b"\x89HDF\r\n\x1a\n" + b"\0" * 512)
+    with pytest.raises(g.GMRInputError, match=r"MATLAB v7.3 \(HDF5\) file, which is not read; save it with"):
+        g.load_recording(tmp_path / "v73.mat", {"x": "qm"})
     (tmp_path / "junk.mat").write_bytes(b"MATLAB 5.0 junk" * 20)
     with pytest.raises(g.GMRInputError, match="cannot read as a MATLAB .mat file"):
         g.load_recording(tmp_path / "junk.mat")

@@ -137,7 +137,6 @@ def find_wells(model, spec, model_path=None):
     import json
 
     import gmr_jax as gmr
-
     from .._basins._wells import pad_wells, polynomial_wells
 
     d = model.n_dof

@@ -5,15 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._args import (
-    find_wells,
-    grid,
-    output_dir,
-    positive_float,
-    positive_int,
-    start_configuration,
-    tolerance,
-)
+from ._args import find_wells, grid, output_dir, positive_float, positive_int, start_configuration, tolerance
 
 
 def register(sub):

@@ -5,19 +5,13 @@ import json
 import time
 from pathlib import Path
 
-import numpy as np
 from matplotlib.figure import Figure
+import numpy as np
 
 from .. import Library, gmc_sindy, reconstruct, resonance_peaks, save_model, stable_wells
 from ..metrics import damping_error, energy_barriers, equilibria, restoring_error
 from ..plots import case_figure
-from ..systems import (
-    KRESLING3_AMPLITUDE,
-    KRESLING5_AMPLITUDE,
-    kresling3,
-    kresling5,
-    make_recordings,
-)
+from ..systems import KRESLING3_AMPLITUDE, KRESLING5_AMPLITUDE, kresling3, kresling5, make_recordings
 
 CHAINS = {"kresling5": (kresling5, KRESLING5_AMPLITUDE, 10.0), "kresling3": (kresling3, KRESLING3_AMPLITUDE, 12.0)}
 #: Base displacement amplitude of the transmissibility runs (m).

@@ -35,7 +35,7 @@ from .._simulate._simulate import simulate
 from ._catalogue import PLAIN, Term, default_catalogue, model_terms
 from ._equation import dof_rows
 from ._identify import (MASS_RANGE, VIF_MAX, DofIdentifiability, ambiguous, closest, explained, homogeneous,
-                        mass_believable, screen, vif)
+                        mass_believable, screen, separability_entry, vif)
 from ._locate import locate, where_sentence
 from ._select import SelectionRule, select_terms
 
@@ -291,13 +291,12 @@ def discover(
             # with the same signal), so selection on this DOF stops at the terms before it
             bad = {k for k, _, _ in amb}
             for k, j, corr in amb:
-                ns.append({"physics": cands[k].physics, "term": cands[k].label, "with": cands[j].label,
-                           "correlation": corr, "r2": corr**2, "vif": vif(corr**2),
-                           "reason": f"explains part of the residual, but these data fit "
-                                     f"{cands[j].physics} ({cands[j].label}) in its place as well (no "
-                                     f"significant difference; correlation {corr:.3f} beyond the "
-                                     f"re-calibrated terms): not a finding, and the part it explains is "
-                                     f"left unattributed"})
+                ns.append(separability_entry(cands[k].physics, cands[k].label, cands[j].label, corr, corr**2,
+                                             f"explains part of the residual, but these data fit "
+                                             f"{cands[j].physics} ({cands[j].label}) in its place as well (no "
+                                             f"significant difference; correlation {corr:.3f} beyond the "
+                                             f"re-calibrated terms): not a finding, and the part it explains is "
+                                             f"left unattributed"))
             good = [keep[k] for k in sel.kept if keep[k] not in bad]
             return good, ns, vifs, select_terms(B, Xc[:, good], y, rule)
 

@@ -77,6 +77,12 @@ def homogeneous(rows) -> bool:
     return applied <= HOMOGENEOUS * max(inertia, 1e-300)
 
 
+def separability_entry(physics: str, term: str, with_: str, corr: float, r2: float, reason: str) -> dict:
+    """One `report.not_separable` entry: a candidate the data cannot tell apart from `with_`."""
+    return {"physics": physics, "term": term, "with": with_, "correlation": corr, "r2": r2, "vif": vif(r2),
+            "reason": reason}
+
+
 def screen(Xb: np.ndarray, Xc: np.ndarray, base_labels: list[str], cand_labels: list[str],
            cand_physics: list[str]) -> tuple[list[int], list[dict], dict]:
     """Candidates separable from the re-calibration columns `Xb`: (indices kept, not-separable
@@ -85,13 +91,12 @@ def screen(Xb: np.ndarray, Xc: np.ndarray, base_labels: list[str], cand_labels: 
     for j in range(Xc.shape[1]):
         r2 = explained(Xc[:, j], Xb)
         vifs[cand_labels[j]] = vif(r2)
-        if vif(r2) >= VIF_MAX:
+        if vifs[cand_labels[j]] >= VIF_MAX:
             with_, corr = closest(Xc[:, j], Xb, base_labels)
-            out.append({"physics": cand_physics[j], "term": cand_labels[j], "with": with_,
-                        "correlation": corr, "r2": r2, "vif": vif(r2),
-                        "reason": f"not separable from {with_} with these data (correlation "
-                                  f"{corr:.3f}, R^2 {r2:.3f} on the re-calibration columns): "
-                                  f"not a finding"})
+            out.append(separability_entry(cand_physics[j], cand_labels[j], with_, corr, r2,
+                                          f"not separable from {with_} with these data (correlation "
+                                          f"{corr:.3f}, R^2 {r2:.3f} on the re-calibration columns): "
+                                          f"not a finding"))
         else:
             keep.append(j)
     return keep, out, vifs
@@ -112,8 +117,9 @@ def residualised(B: np.ndarray, X: np.ndarray) -> np.ndarray:
 
 
 def _rss(Z: np.ndarray, y: np.ndarray) -> float:
-    coef, *_ = np.linalg.lstsq(_unit(Z), y, rcond=1e-12)
-    r = y - _unit(Z) @ coef
+    Zu = _unit(Z)
+    coef, *_ = np.linalg.lstsq(Zu, y, rcond=1e-12)
+    r = y - Zu @ coef
     return float(r @ r)
 
 

@@ -314,8 +314,7 @@ def check_determination(dof: int, stiffness, covariance, x_lo: float, x_hi: floa
     c = np.asarray(covariance, float)
     if not (np.all(np.isfinite(c)) and np.isfinite(x_lo) and np.isfinite(x_hi) and x_hi > x_lo):
         return []
-    xs = np.linspace(x_lo, x_hi, 201)
-    phi = xs[:, None] ** np.arange(k.shape[0])[None, :]
+    phi = np.polynomial.polynomial.polyvander(np.linspace(x_lo, x_hi, 201), k.shape[0] - 1)
     f = phi @ k
     sd = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", phi, c, phi), 0.0, None))
     rel = 2.0 * np.linalg.norm(sd) / max(np.linalg.norm(f), 1e-300)

@@ -13,8 +13,17 @@ FIELDS = ("t", "x", "v", "a", "base_acc", "force", "masses")
 _TOKEN = re.compile(r"\s*([*/])\s*")
 
 
+def _squeeze(v) -> np.ndarray:
+    """A stored value as a signal: a 1x1 matrix (a gain) is a number, a column or row vector (N,)."""
+    v = np.asarray(v, float)
+    if v.size == 1:
+        return v.reshape(())
+    return v.reshape(-1) if v.ndim == 2 and 1 in v.shape else v
+
+
 def read_mat(path: Path, src: str) -> dict:
-    """Every numeric variable of a MATLAB v4-v7.2 file (scipy.io), squeezed: (N, 1) -> (N,)."""
+    """Every numeric variable of a MATLAB v4-v7.2 file (scipy.io); v7.3 (HDF5) files make
+    scipy raise NotImplementedError, named here."""
     import scipy.io
 
     try:
@@ -28,8 +37,7 @@ def read_mat(path: Path, src: str) -> dict:
     for k, v in raw.items():
         if k.startswith("__") or not isinstance(v, np.ndarray) or v.dtype.kind not in "fiu":
             continue
-        v = np.asarray(v, float)
-        out[k] = v.reshape(()) if v.size == 1 else v.reshape(-1) if v.ndim == 2 and 1 in v.shape else v
+        out[k] = v
     return out
 
 
@@ -43,11 +51,7 @@ def _evaluate(expr: str, variables: dict, field: str, src: str):
             op = tok
             continue
         if tok in variables:
-            term = np.asarray(variables[tok], float)
-            if term.size == 1:
-                term = term.reshape(())  # a gain stored as a 1x1 matrix
-            elif term.ndim == 2 and 1 in term.shape:
-                term = term.reshape(-1)
+            term = _squeeze(variables[tok])
         else:
             try:
                 term = np.asarray(float(tok))
@@ -79,9 +83,7 @@ def map_columns(variables: dict, columns: dict | None, src: str) -> dict:
             else:
                 out[field] = _evaluate(str(spec), variables, field, src)
         elif field in variables:
-            out[field] = variables[field]
-        if field in ("t", "base_acc", "masses") and np.ndim(out.get(field)) == 2 and 1 in np.shape(out[field]):
-            out[field] = np.reshape(out[field], -1)  # a stored column or row vector
+            out[field] = _squeeze(variables[field])
     for need in ("t", "x"):
         if need not in out:
             raise GMRInputError(f"{src}: no '{need}': the file has {sorted(variables)}; map one, e.g. "

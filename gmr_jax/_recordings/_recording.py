@@ -431,14 +431,14 @@ def load_recording(path, columns: dict | None = None) -> Recording:
         raise GMRInputError(f"{src}: the file is empty (0 bytes)")
     try:
         suffix = path.suffix.lower()
-        if columns is not None or suffix == ".mat":
+        read = _read_csv if suffix == ".csv" else _read_npz
+        if suffix == ".mat" or columns is not None:  # the file's own names, mapped to the fields
             from ._mapping import map_columns, read_mat
 
-            raw = (_read_csv(path, src, raw=True) if suffix == ".csv" else read_mat(path, src) if suffix == ".mat"
-                   else _read_npz(path, src, raw=True))
+            raw = read_mat(path, src) if suffix == ".mat" else read(path, src, raw=True)
             rec = Recording(**map_columns(raw, columns, src), name=path.stem)
         else:
-            rec = _read_csv(path, src) if suffix == ".csv" else _read_npz(path, src)
+            rec = read(path, src)
     except OSError as e:
         raise GMRInputError(f"{src}: cannot read ({e.strerror or type(e).__name__})") from None
     except GMRInputError as e:  # the Recording's own checks name it by its stem: use the path
