@@ -13,9 +13,12 @@ Steps (per DOF / cell):
 3. **Model and show**: the augmented model (corrections added to the model's coefficients, new
    terms appended) and the error before/after on the holdout recordings: output (simulation)
    error NRMSE ||x_sim - x|| / ||x - mean x|| when both models can be simulated under the
-   recorded inputs (low-passed at 1.5 x their band edge, `smooth_input`) from the recorded
-   initial state, else equation error ||r|| / ||y|| (y the
-   force the DOF carries). The report states which.
+   recorded inputs (low-passed at 1.5 x their band edge, `smooth_input`, and interpolated by a
+   cubic spline: a band-limited input has no kinks between its samples) from the recorded
+   initial state, with a step budget that grows with the record; else equation error
+   ||r|| / ||y|| (y the force the DOF carries). The report states which and, for equation
+   error, why output error was not possible (`why_not_output`: asked for, no restoring force as
+   in a closed-loop plant, or the simulation's result code).
 """
 
 from dataclasses import dataclass, field
@@ -25,17 +28,17 @@ import numpy as np
 from scipy.signal import butter, filtfilt
 
 from .._errors import GMRInputError
-from .._solution import RESULTS, Solution, raise_if_failed
+from .._solution import RESULTS, Solution, code_name, message, raise_if_failed
 from .._model._model import GlobalModel, from_terms
-from .._recordings._derivatives import auto_window, band_edge
+from .._recordings._derivatives import auto_window, band_edge, window_choice
 from .._recordings._recording import Recording, validate
-from .._simulate._inputs import Sampled
+from .._simulate._inputs import sampled_spline
 from .._simulate._integrate import Integrator
 from .._simulate._simulate import simulate
 from ._catalogue import PLAIN, Term, default_catalogue, model_terms
 from ._equation import dof_rows
-from ._identify import (MASS_RANGE, VIF_MAX, DofIdentifiability, ambiguous, closest, explained, homogeneous,
-                        mass_believable, screen, separability_entry, vif)
+from ._identify import (MASS_RANGE, VIF_MAX, DofIdentifiability, ambiguous, closest, collinear_entry, determined,
+                        explained, homogeneous, mass_believable, screen, separability_entry, vif)
 from ._locate import locate, where_sentence
 from ._select import SelectionRule, select_terms
 
@@ -112,15 +115,24 @@ def smooth_input(u: np.ndarray, dt: float) -> np.ndarray:
 
 
 def _simulate_x(model, rec: Recording, eps):
+    """Simulated x of `model` under the recording's (smoothed) inputs from its recorded initial
+    state: (x or None, why not)."""
     d = model.n_dof
     b, f = rec.inputs()
     b, f = smooth_input(b, rec.dt), smooth_input(f, rec.dt)
     k = sim_start(rec)
-    inp = Sampled(jnp.asarray(rec.t), jnp.asarray(b), jnp.asarray(f), n_dof=d)
+    inp = sampled_spline(rec.t, b, f, d)
+    # a step budget that grows with the record (at least 20 steps per sample)
+    integ = SIM if 20 * rec.n_samples <= SIM.max_steps else Integrator(
+        rtol=SIM.rtol, atol=SIM.atol, max_steps=int(20 * rec.n_samples))
     sol = simulate(model.with_sign_eps(eps), inp, jnp.asarray(rec.t[k:]), jnp.asarray(rec.x[k]),
-                   jnp.asarray(rec.v[k]), integrator=SIM, throw=False)
+                   jnp.asarray(rec.v[k]), integrator=integ, throw=False)
     x = np.asarray(sol.value[0])
-    return x if np.all(np.isfinite(x)) else None
+    if code_name(sol.result) != "successful":
+        return None, f"its simulation on {rec.name} did not complete: {message(sol.result)}"
+    if not np.all(np.isfinite(x)):
+        return None, f"its simulation on {rec.name} diverged (non-finite state)"
+    return x, ""
 
 
 def sim_start(rec: Recording) -> int:
@@ -132,9 +144,27 @@ def sim_start(rec: Recording) -> int:
     return int(min(w // 2 + 1, rec.n_samples // 10))
 
 
-def _has_restoring(model) -> bool:
+def _form_reason(asked, form, estimated, clear, decimate) -> str:
+    if asked != "auto":
+        return f"{form}: asked for"
+    if not estimated:
+        return "strong: x, v and a recorded"
+    if decimate > 1:
+        return "strong: decimate > 1 asked for (parallel low-pass of every column)"
+    if clear:
+        return ("strong: every estimated signal stands 10 dB above its noise floor far beyond its band edge "
+                "(the derivative window was set by the noise floor), so its acceleration is usable")
+    return ("weak: the acceleration was estimated and the noise floor starts near the band edge of x "
+            "(test-function integrals need no acceleration)")
+
+
+def _has_restoring_dof(model, i) -> bool:
     k = np.asarray(model.stiffness)
-    return k.shape[1] > 1 and bool(np.all(np.any(k[:, 1:] != 0, axis=1)))
+    return k.shape[1] > 1 and bool(np.any(k[i, 1:] != 0))
+
+
+def _has_restoring(model) -> bool:
+    return all(_has_restoring_dof(model, i) for i in range(model.n_dof))
 
 
 def holdout_errors(model, recs, settings: dict, error: str = "auto") -> dict:
@@ -150,14 +180,24 @@ def holdout_errors(model, recs, settings: dict, error: str = "auto") -> dict:
             eq_den += rows.scale
     out = {"equation_nrmse": float(np.sqrt(eq_num / eq_den)),
            "equation_nrmse_per_dof": np.sqrt(per_dof[:, 0] / per_dof[:, 1]).tolist()}
-    if error in ("auto", "output") and _has_restoring(model):
+    if error == "equation":
+        out["why_not_output"] = "equation error asked for (error='equation')"
+    elif not _has_restoring(model):
+        free = [i for i in range(model.n_dof) if not _has_restoring_dof(model, i)]
+        out["why_not_output"] = (
+            f"the model has no restoring (position-dependent) force on DOF {', '.join(map(str, free))}: under the "
+            f"recorded input alone its position has no equilibrium to return to and drifts. A plant held in "
+            f"place by a position controller (closed loop, as the EMPS drive) needs that controller in the "
+            f"model to be simulated; only equation (force) error is possible here")
+    else:
         num = den = 0.0
         sims = []
         for r in recs:
             eps = 1e-3 * float(np.sqrt(np.mean(r.v**2)))
-            x = _simulate_x(model, r, eps)
+            x, why = _simulate_x(model, r, eps)
             if x is None:
                 sims = None
+                out["why_not_output"] = why
                 break
             sims.append(x)
             xm = r.x[sim_start(r):]
@@ -201,8 +241,12 @@ def discover(
     - `catalogue`: candidate `Term`s (default `default_catalogue`); terms already in the model
       are re-calibration columns, not candidates.
     - `rule`: the selection rule (`SelectionRule`; see `_select`).
-    - `form`: "strong", "weak" (test-function integrals, no acceleration needed) or "auto"
-      (weak when any `a` was estimated, strong otherwise).
+    - `form`: "strong", "weak" (test-function integrals, no acceleration needed) or "auto":
+      strong when `a` was recorded, or estimated from signals that stand clear of their noise
+      floor far above their band edge (`window_choice` set the derivative window by the noise
+      floor: the EMPS encoder); weak when an estimated `a` comes from a signal whose noise floor
+      starts near its band edge. `report.settings["form_reason"]` says which and why;
+      `settings["derivative_windows"]` gives each estimated signal's window and cut-offs.
     - `support`: weak-form test-function support in samples (default: one period at the band
       edge). `decimate`: strong form, low-pass and decimate the regression columns in parallel.
     - `refit_masses`: let the masses move in the re-calibration (default: independent topology).
@@ -229,8 +273,14 @@ def discover(
         if r.n_dof != d:
             raise GMRInputError(f"{r.name}: has {r.n_dof} DOFs but the model has {d}")
     estimated = any(r.a is None or "a" in r.derived for r in recs)
+    # the automatic derivative windows, and whether every estimated signal stands clear of its
+    # noise floor far above its band edge (then its estimated acceleration is trustworthy)
+    windows = {f"{r.name}[{k}]": window_choice(r.x[:, k], r.dt) for r in recs
+               if r.a is None or "a" in r.derived for k in range(r.n_dof)}
+    clear = estimated and all(c["rule"] == "noise floor" for c in windows.values())
+    form_asked = form
     if form == "auto":
-        form = "weak" if (estimated and decimate == 1) else "strong"
+        form = "weak" if (estimated and decimate == 1 and not clear) else "strong"
     if form not in ("strong", "weak"):
         raise GMRInputError(f"discover: form must be 'strong', 'weak' or 'auto', got {form!r}")
     if error not in ("auto", "output", "equation"):
@@ -245,8 +295,12 @@ def discover(
     catalogue = default_catalogue(d) if catalogue is None else list(catalogue)
     settings = {"form": form, "support": support, "decimate": int(decimate),
                 "refit_masses": bool(refit_masses), "derivatives":
-                "recorded" if not estimated else "Savitzky-Golay (quintic, automatic window) for "
-                "the missing signals" + ("; weak form: no acceleration used" if form == "weak" else ""),
+                "recorded" if not estimated else "Savitzky-Golay (quintic, automatic window: the smaller of "
+                "0.3 period at the 99.5 % band edge and the window whose cut-off is where the spectrum meets "
+                "10 x its noise floor) for the missing signals" + (
+                    "; weak form: no acceleration used" if form == "weak" else ""),
+                "derivative_windows": windows, "form_reason": _form_reason(form_asked, form, estimated, clear,
+                                                                            decimate),
                 "rule": rule.__dict__, "holdout": [r.name for r in hold] or "estimation recordings "
                 "(no holdout given)", "estimation": [r.name for r in recs]}
 
@@ -280,25 +334,50 @@ def discover(
 
         def select(with_mass):
             B = np.concatenate([mcol[:, None], Xb], 1) if with_mass else Xb
-            keep, ns, vifs = screen(B, Xc, (["mass"] if with_mass else []) + labels,
-                                    [t.label for t in cands], [t.physics for t in cands])
-            sel = select_terms(B, Xc[:, keep], y, rule)
-            amb = ambiguous(B, Xc, [keep[k] for k in sel.kept], y, sel.n_rows / max(sel.tau, 1.0), rule.alpha)
-            if not amb:
-                return keep, ns, vifs, sel
-            # a kept term that another candidate reproduces: these data cannot name what it
-            # explains, and neither can a substitute (the next candidate would take its place
-            # with the same signal), so selection on this DOF stops at the terms before it
-            bad = {k for k, _, _ in amb}
-            for k, j, corr in amb:
-                ns.append(separability_entry(cands[k].physics, cands[k].label, cands[j].label, corr, corr**2,
-                                             f"explains part of the residual, but these data fit "
-                                             f"{cands[j].physics} ({cands[j].label}) in its place as well (no "
-                                             f"significant difference; correlation {corr:.3f} beyond the "
-                                             f"re-calibrated terms): not a finding, and the part it explains is "
-                                             f"left unattributed"))
-            good = [keep[k] for k in sel.kept if keep[k] not in bad]
-            return good, ns, vifs, select_terms(B, Xc[:, good], y, rule)
+            blabels = (["mass"] if with_mass else []) + labels
+            keep, ns, vifs = screen(B, Xc, blabels, [t.label for t in cands], [t.physics for t in cands])
+            screened, bad = keep, set()
+            for it in range(len(screened) + 1):
+                sel = select_terms(B, Xc[:, keep], y, rule)
+                new = set()
+                # a kept term that another candidate reproduces: these data cannot name what it
+                # explains, and neither can a substitute (the next candidate would take its place
+                # with the same signal), so selection on this DOF stops at the other kept terms.
+                # Tested once, on the first selection: each kept term against its substitutes
+                # with every other kept term in the fit (an unattributed part left in the
+                # residual would only weaken the test of the others)
+                for k, j, corr in [] if it else ambiguous(B, Xc, [keep[k] for k in sel.kept], y,
+                                                          sel.n_rows / max(sel.tau, 1.0), rule.alpha):
+                    new.add(k)
+                    ns.append(separability_entry(
+                        cands[k].physics, cands[k].label, cands[j].label, corr, corr**2,
+                        f"explains part of the residual, but these data fit {cands[j].physics} ({cands[j].label}) "
+                        f"in its place as well (no significant difference; correlation {corr:.3f} beyond the "
+                        f"re-calibrated terms): not a finding, and the part it explains is left unattributed"))
+                # a kept collinear term (VIF_MAX <= VIF < VIF_HARD) must be determined apart from
+                # the columns it is collinear with
+                for pos, k in enumerate(sel.kept):
+                    j = keep[k]
+                    if j not in new and vifs[cands[j].label] >= VIF_MAX and not determined(
+                            sel.coef_kept[pos], sel.ci_kept[pos]):
+                        new.add(j)
+                        lo, hi = sel.ci_kept[pos]
+                        ns.append(collinear_entry(cands[j].physics, cands[j].label, B, Xc[:, j], blabels,
+                                                  f"its coefficient is not determined apart from it (95 % CI "
+                                                  f"{lo:.4g} to {hi:.4g})"))
+                if not new:
+                    break
+                bad |= new
+                keep = [keep[k] for k in sel.kept if keep[k] not in bad]
+            # collinear candidates the rule did not keep: listed, so that "nothing found" is not
+            # read as "absent"
+            chosen = {keep[k] for k in sel.kept}
+            for j in screened:
+                if j not in chosen and j not in bad and vifs[cands[j].label] >= VIF_MAX:
+                    ns.append(collinear_entry(cands[j].physics, cands[j].label, B, Xc[:, j], blabels,
+                                              "these data do not determine what is left of it (the selection "
+                                              "rule did not keep it)"))
+            return keep, ns, vifs, sel
 
         refit_i = ident.mass == "refit"
         keep, ns, vifs, sel = select(refit_i)
@@ -388,8 +467,12 @@ def discover(
         f["holdout_without"] = e["output_nrmse"] if kind == "output" and "output_nrmse" in e else e["equation_nrmse"]
     series["holdout"] = hold_c
     series["sims"] = (before.pop("_sims", None), after.pop("_sims", None))
+    why = before.get("why_not_output") or after.get("why_not_output")
     for e in (before, after):
         e["kind"] = kind
+        if kind == "equation":
+            e["why_not_output"] = (("the augmented model: " if "why_not_output" not in before else "") + why
+                                   if why else "output error not asked for")
         e["nrmse"] = e["output_nrmse"] if use_output else e["equation_nrmse"]
         e["on"] = "holdout" if hold else "estimation (no holdout given)"
     warns = []

@@ -5,10 +5,15 @@
   least-squares re-calibration that may move the mass slides to the trivial c -> 0. The mass is
   then held: it sets the scale, and the data fix only ratios to it.
 - **Separability (variance inflation).** A column that the others reproduce (uncentred R^2 of
-  its least-squares fit on them >= 1 - 1/`VIF_MAX`) cannot be told apart from them with these
-  data: a candidate so confounded with the re-calibration columns (the model's own terms, the
-  mass) is reported as "not separable from <term>" with the correlation, never as a finding; a
-  mass so confounded with the model's terms is held.
+  its least-squares fit on them) is confounded with them. Two levels:
+  `VIF_HARD` (R^2 >= 0.99): the column cannot be told apart from them with these data; such a
+  candidate is reported as "not separable from <term>" with the correlation, never as a
+  finding (a spring against the mass at one frequency: VIF ~1500). `VIF_MAX` (R^2 >= 0.95):
+  collinear, but what is left of it may still be determined (EMPS: sgn(v) is 98 % correlated
+  with v on its trapezoidal velocity profiles, VIF 26, yet the Coulomb level is fixed to +-8 %
+  by 25,000 samples); such a candidate competes, but counts only when the selection rule keeps
+  it and its bootstrap interval is tight (`determined`), else it is listed as not separable.
+  A mass with VIF >= `VIF_MAX` against the model's terms is held.
 - **A re-calibrated mass must stay a mass.** A mass moved outside [m/2, 2m] (or to <= 0) by the
   re-calibration is not believed: it is held and the DOF refitted.
 """
@@ -17,8 +22,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-#: variance inflation above which a column is not separable from the others (R^2 >= 0.95)
+#: variance inflation above which a candidate is collinear with the re-calibration columns
+#: (R^2 >= 0.95) and counts only when determined (`determined`); a mass above it is held
 VIF_MAX = 20.0
+#: variance inflation above which a candidate is not separable at all (R^2 >= 0.99)
+VIF_HARD = 100.0
+#: a collinear candidate is determined when its 95 % interval excludes zero and its half-width
+#: is at most this fraction of the coefficient
+DETERMINED_HALF_WIDTH = 0.5
+#: partial correlation (beyond the re-calibration columns) from which a candidate that fits as
+#: well as a kept term is a substitute for it (`ambiguous`)
+SWAP_CORR = 0.5
 #: applied-force energy relative to the inertial one below which a DOF has no force input
 HOMOGENEOUS = 1e-12
 #: the range a re-calibrated mass may move within, relative to the model's mass
@@ -85,13 +99,13 @@ def separability_entry(physics: str, term: str, with_: str, corr: float, r2: flo
 
 def screen(Xb: np.ndarray, Xc: np.ndarray, base_labels: list[str], cand_labels: list[str],
            cand_physics: list[str]) -> tuple[list[int], list[dict], dict]:
-    """Candidates separable from the re-calibration columns `Xb`: (indices kept, not-separable
-    entries, VIF of every candidate)."""
+    """Candidates not hopelessly confounded with the re-calibration columns `Xb` (VIF <
+    `VIF_HARD`): (indices kept, not-separable entries, VIF of every candidate)."""
     keep, out, vifs = [], [], {}
     for j in range(Xc.shape[1]):
         r2 = explained(Xc[:, j], Xb)
         vifs[cand_labels[j]] = vif(r2)
-        if vifs[cand_labels[j]] >= VIF_MAX:
+        if vifs[cand_labels[j]] >= VIF_HARD:
             with_, corr = closest(Xc[:, j], Xb, base_labels)
             out.append(separability_entry(cand_physics[j], cand_labels[j], with_, corr, r2,
                                           f"not separable from {with_} with these data (correlation "
@@ -100,6 +114,23 @@ def screen(Xb: np.ndarray, Xc: np.ndarray, base_labels: list[str], cand_labels: 
         else:
             keep.append(j)
     return keep, out, vifs
+
+
+def determined(coef: float, ci: np.ndarray) -> bool:
+    """A collinear candidate's coefficient is determined apart from the columns it is collinear
+    with: its 95 % interval excludes zero and is at most +-`DETERMINED_HALF_WIDTH` of it."""
+    lo, hi = float(ci[0]), float(ci[1])
+    return bool(lo * hi > 0 and 0.5 * (hi - lo) <= DETERMINED_HALF_WIDTH * abs(coef))
+
+
+def collinear_entry(physics: str, term: str, Xb: np.ndarray, c: np.ndarray, base_labels: list[str],
+                    why: str) -> dict:
+    """A not-separable entry for a collinear (VIF_MAX <= VIF < VIF_HARD) candidate not determined."""
+    r2 = explained(c, Xb)
+    with_, corr = closest(c, Xb, base_labels)
+    return separability_entry(physics, term, with_, corr, r2,
+                              f"collinear with {with_} in these data (correlation {corr:.3f}, R^2 {r2:.3f} on "
+                              f"the re-calibration columns, VIF {vif(r2):.3g}) and {why}: not a finding")
 
 
 def mass_believable(m: float, dm: float) -> bool:
@@ -130,7 +161,10 @@ def ambiguous(B: np.ndarray, Xc: np.ndarray, kept: list[int], y: np.ndarray, n_e
     sum of squares by less than the F(1, n_eff) critical value at `alpha` times the residual
     variance (n_eff: rows / integrated autocorrelation time). Such a term explains something,
     but these data cannot say which physics it is: at one forcing frequency, quadratic drag
-    beyond its viscous part and cubic damping are both a third harmonic."""
+    beyond its viscous part and cubic damping are both a third harmonic. Only substitutes whose
+    part beyond B is correlated with the kept term's (|partial correlation| >= `SWAP_CORR`) count:
+    a nearly orthogonal column that fits "as well" explains a different part of the residual
+    (low power, not confounding; the F-test and the bootstrap judge the term itself)."""
     from scipy.stats import f as f_dist
 
     if not kept:
@@ -148,6 +182,8 @@ def ambiguous(B: np.ndarray, Xc: np.ndarray, kept: list[int], y: np.ndarray, n_e
                 continue
             swap = full.copy()
             swap[:, B.shape[1] + pos] = Xc[:, j]
+            if abs(float(R[:, k] @ R[:, j])) < SWAP_CORR:
+                continue
             d = (_rss(swap, y) - rss) / max(s2, 1e-300)
             if d < crit and (best is None or d < best[0]):
                 best = (d, j)

@@ -1,7 +1,5 @@
 """The readable summary of a `DiscoveryReport` (its figures: `gmr_jax.plots.discovery_figures`)."""
 
-
-
 from ._catalogue import PLAIN
 
 
@@ -41,6 +39,8 @@ def summary(report) -> str:
             lines.append(f"  re-calibration, {_cell(report, c['dof'])}: {what} {_g(mv)} -> "
                          f"{_g(mv + c['coefficient'])} (correction {_g(c['coefficient'])}, 95 % CI "
                          f"{_g(lo)} to {_g(hi)})")
+    if b["kind"] == "equation" and b.get("why_not_output"):
+        lines.append(f"  error measure: equation (force) error, not simulation (output) error: {b['why_not_output']}")
     for w in report.warnings:
         lines.append(f"  warning: {w}")
     for d in report.identifiability:

@@ -2,9 +2,20 @@
 
 Savitzky-Golay differentiation (local quintic least-squares fit over a sliding window, Savitzky &
 Golay 1964): a polynomial smoother whose window trades noise against bias. The window is chosen
-from the data when not given: the odd window spanning 0.3 of the
-period at the signal's band edge (the frequency below which 99.5 % of its power lies), so that a quintic follows the signal while averaging
-many samples of noise. Edges use the same fitted polynomial (scipy's `mode="interp"`).
+from the data when not given (`window_choice`), as the smaller of two:
+
+- **band edge**: the odd window spanning 0.3 of the period at the signal's band edge (the
+  frequency below which 99.5 % of its power lies), so that a quintic follows the signal while
+  averaging many samples of noise;
+- **noise floor**: the window whose -3 dB cut-off (Schafer 2011: f_c / f_Nyquist ~ (p + 1) /
+  (3.2 M - 4.6), window 2M + 1, p the degree) is the highest frequency at which the signal still
+  stands 10 dB above its noise floor (Welch spectrum; the floor is the median level of the top
+  fifth of the band). A signal whose power is at low frequency but which carries real content
+  far above (a trapezoidal motion profile with sharp velocity reversals, as the EMPS drive:
+  99.5 % band edge 0.44 Hz, clear of the encoder's quantisation floor up to ~250 Hz) would be
+  smeared by the band-edge window (677 samples there; 13 by the noise floor).
+
+Edges use the same fitted polynomial (scipy's `mode="interp"`).
 """
 
 import numpy as np
@@ -33,13 +44,54 @@ def band_edge(x: np.ndarray, dt: float, fraction: float = 0.995) -> float:
     return float(freqs[min(int(np.searchsorted(c, fraction)), freqs.size - 1)])
 
 
-def auto_window(x: np.ndarray, dt: float, polyorder: int = 5) -> int:
+#: the signal must stand this far above the noise floor (power ratio, 10 dB) to set the cut-off
+FLOOR_RATIO = 10.0
+
+
+def noise_cutoff(x: np.ndarray, dt: float) -> float:
+    """Frequency (Hz) at which the Welch spectrum of x (mean removed; segments of up to 2048
+    samples, running median over 9 bins against isolated lines) first falls below `FLOOR_RATIO`
+    times the noise floor (the median level of the top fifth of the band), searching upwards
+    from the 99.5 % band edge; the Nyquist frequency when it never does."""
+    from scipy.ndimage import median_filter
+    from scipy.signal import welch
+
+    x = np.asarray(x, float)
+    x = x - np.mean(x)
+    nper = int(min(x.size, 2048))
+    f, p = welch(x, fs=1.0 / dt, nperseg=nper)
+    if f.size < 10:
+        return float(f[-1])
+    p = median_filter(p, size=9, mode="nearest")
+    floor = float(np.median(p[f >= 0.8 * f[-1]]))
+    below = np.nonzero((p < FLOOR_RATIO * floor) & (f >= band_edge(x, dt)))[0]
+    return float(f[below[0]]) if below.size else float(f[-1])
+
+
+def _odd_window(w: float, n: int, polyorder: int) -> int:
+    w = max(int(round(w)), polyorder + 2)
+    w = min(w, n - (1 - n % 2))
+    return w if w % 2 == 1 else w + 1
+
+
+def window_choice(x: np.ndarray, dt: float, polyorder: int = 5) -> dict:
+    """The automatic Savitzky-Golay window of x and why (module docstring): `window`, `rule`
+    ("band edge" or "noise floor"), `band_edge_hz`, `noise_cutoff_hz` and both windows."""
+    x = np.asarray(x, float)
     f = band_edge(x, dt)
     period = 1.0 / f if f > 0 else dominant_period(x, dt)
-    w = int(round(0.3 * period / dt))
-    w = max(w, polyorder + 2)
-    w = min(w, x.size - (1 - x.size % 2))
-    return w if w % 2 == 1 else w + 1
+    w_band = _odd_window(0.3 * period / dt, x.size, polyorder)
+    fc = noise_cutoff(x, dt)
+    frac = min(fc * 2 * dt, 1.0)
+    w_noise = _odd_window(2 * (((polyorder + 1) / max(frac, 1e-12) + 4.6) / 3.2) + 1, x.size, polyorder)
+    rule = "noise floor" if w_noise < w_band else "band edge"
+    return {"window": min(w_band, w_noise), "rule": rule, "band_edge_hz": f, "noise_cutoff_hz": fc,
+            "band_edge_window": w_band, "noise_floor_window": w_noise}
+
+
+def auto_window(x: np.ndarray, dt: float, polyorder: int = 5) -> int:
+    """The automatic Savitzky-Golay window of x (samples, odd): `window_choice`."""
+    return window_choice(x, dt, polyorder)["window"]
 
 
 def differentiate(

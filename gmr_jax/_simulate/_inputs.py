@@ -20,6 +20,10 @@ class AbstractInput(eqx.Module):
         """Times where the input is discontinuous (declared to the step-size controller)."""
         return None
 
+    def step_times(self) -> Float[Array, " steps"] | None:
+        """Times where the input has a kink (a step is made there, no step straddles them)."""
+        return None
+
 
 class NoInput(AbstractInput):
     n_dof: int = eqx.field(static=True, default=1)
@@ -108,15 +112,56 @@ def half_sine(load: str, f, A, n_dof: int) -> AbstractInput:
 
 
 class Sampled(AbstractInput):
-    """Measured inputs, linearly interpolated between samples (zero after the last)."""
+    """Measured inputs, linearly interpolated between samples (zero after the last).
+
+    `declare_samples=True` declares the sample times to the step-size controller (a step ends
+    at every sample, where the interpolant has a kink): without it a long record with a rough
+    input costs many rejected steps (~17 per sample on a 30,000-sample EMPS run)."""
 
     t: Float[Array, " samples"]
     base_acc: Float[Array, " samples"]
     force: Float[Array, "samples dof"]
     n_dof: int = eqx.field(static=True, default=1)
+    declare_samples: bool = eqx.field(static=True, default=False)
+
+    def step_times(self):
+        return self.t if self.declare_samples else None
 
     def __call__(self, t):
         inside = t <= self.t[-1]
         b = jnp.where(inside, jnp.interp(t, self.t, self.base_acc), 0.0)
         f = jnp.stack([jnp.interp(t, self.t, self.force[:, i]) for i in range(self.n_dof)])
         return b, jnp.where(inside, f, 0.0)
+
+
+class SampledSpline(AbstractInput):
+    """Measured band-limited inputs, interpolated by a not-a-knot cubic spline between samples
+    (C2, so no kink for the step-size controller; zero after the last sample). Build it with
+    `sampled_spline`. For a band-limited input sampled at ~9 points per period a linear
+    interpolant distorts the response (each kink excites the model); the spline does not."""
+
+    t: Float[Array, " samples"]
+    coef_b: Float[Array, "4 intervals"]
+    coef_f: Float[Array, "4 intervals dof"]
+    n_dof: int = eqx.field(static=True, default=1)
+
+    def __call__(self, t):
+        i = jnp.clip(jnp.searchsorted(self.t, t, side="right") - 1, 0, self.t.shape[0] - 2)
+        s = t - self.t[i]
+
+        def horner(c):
+            return ((c[0, i] * s + c[1, i]) * s + c[2, i]) * s + c[3, i]
+
+        inside = t <= self.t[-1]
+        return jnp.where(inside, horner(self.coef_b), 0.0), jnp.where(inside, horner(self.coef_f), 0.0)
+
+
+def sampled_spline(t, base_acc, force, n_dof: int) -> SampledSpline:
+    """`SampledSpline` of sampled inputs (numpy arrays: t (N,), base_acc (N,), force (N, dof))."""
+    import numpy as np
+    from scipy.interpolate import CubicSpline
+
+    t = np.asarray(t, float)
+    cb = CubicSpline(t, np.asarray(base_acc, float)).c
+    cf = CubicSpline(t, np.asarray(force, float).reshape(t.size, n_dof), axis=0).c
+    return SampledSpline(jnp.asarray(t), jnp.asarray(cb), jnp.asarray(cf), n_dof=n_dof)

@@ -119,7 +119,8 @@ def _simulate(model, inputs, ts, x0, v0, integrator, *, box, throw):
     v0 = jnp.zeros_like(x0) if v0 is None else jnp.asarray(v0, float)
     lo, hi = (-box, box) if not isinstance(box, tuple) else box
     traj = integrate(vector_field(model, inputs), ts[0], ts[-1], (x0, v0), integrator,
-                     saveat=dfx.SaveAt(ts=ts), box=(lo, hi), jump_ts=inputs.jump_times())
+                     saveat=dfx.SaveAt(ts=ts), box=(lo, hi), jump_ts=inputs.jump_times(),
+                     step_ts=inputs.step_times())
     good = traj.result == RESULTS.successful
     xs, vs = (jnp.where(good, y, jnp.nan) for y in traj.ys)
     return error_if_failed(Solution(value=(xs, vs), result=traj.result, stats=traj.stats), throw)
