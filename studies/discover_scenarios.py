@@ -23,10 +23,14 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from scenarios import Scenario, build_full, model_error
 
 import gmr_jax
 from gmr_jax import Term
+
+if __package__:  # imported as studies.discover_scenarios (the tests)
+    from .scenarios import Scenario, build_full, model_error
+else:  # run as a script
+    from scenarios import Scenario, build_full, model_error
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 
