@@ -184,3 +184,56 @@ def test_cli_columns_option():
     for bad in ("x", "=qm", "x=", ","):
         with pytest.raises(g.GMRInputError, match="--columns"):
             columns(bad)
+
+
+def _trapezoid_motion(rng, snr_quant=1e-6):
+    """A slow point-to-point motion with sharp velocity reversals (the EMPS shape): trapezoidal
+    velocity at 1 kHz, position quantised like an encoder."""
+    dt = 1e-3
+    t = np.arange(20000) * dt
+    ph = (t % 4.0) / 4.0
+    v = np.interp(ph, [0, 0.05, 0.45, 0.5, 0.55, 0.95, 1.0], [0, 0.2, 0.2, 0, -0.2, -0.2, 0])
+    x = np.cumsum(v) * dt
+    return t, dt, np.round(x / snr_quant) * snr_quant, v
+
+
+def test_window_from_the_noise_floor_when_the_signal_is_clear_far_above_its_band_edge(rng):
+    from gmr_jax._recordings._derivatives import window_choice
+
+    t, dt, xq, v = _trapezoid_motion(rng)
+    ch = window_choice(xq, dt)
+    assert ch["rule"] == "noise floor" and ch["window"] < ch["band_edge_window"] / 10
+    assert ch["noise_cutoff_hz"] > 20 * ch["band_edge_hz"]
+    vb = g.differentiate(xq, dt, 1, ch["band_edge_window"])
+    va = g.differentiate(xq, dt)  # automatic: the noise-floor window
+    inner = slice(500, -500)
+    err = lambda e: np.sqrt(np.mean((e[inner] - v[inner]) ** 2))  # noqa: E731
+    assert err(va) < 0.3 * err(vb)  # the band-edge window smears the reversals
+    # a band-limited noisy signal keeps the band-edge window (the noise floor starts at its edge)
+    s = np.sin(2 * np.pi * 1.3 * t) + 0.5 * np.sin(2 * np.pi * 3.1 * t) + 1e-2 * rng.normal(size=t.size)
+    assert window_choice(s, dt)["rule"] == "band edge"
+
+
+def test_sampled_spline_input_is_smooth_and_matches_a_band_limited_signal():
+    import jax
+    import jax.numpy as jnp
+
+    from gmr_jax._simulate._inputs import Sampled, sampled_spline
+
+    dt = 0.1  # ~9 samples per period at 1.1 Hz
+    t = np.arange(100) * dt
+    f = np.sin(2 * np.pi * 1.1 * t)
+    sp = sampled_spline(t, np.zeros_like(t), f[:, None], 1)
+    lin = Sampled(jnp.asarray(t), jnp.zeros(t.size), jnp.asarray(f[:, None]), n_dof=1)
+    tt = np.linspace(0.5, 9.0, 997)
+    true = np.sin(2 * np.pi * 1.1 * tt)
+    e_sp = np.max(np.abs(np.asarray(jax.vmap(lambda s: sp(s)[1][0])(tt)) - true))
+    e_li = np.max(np.abs(np.asarray(jax.vmap(lambda s: lin(s)[1][0])(tt)) - true))
+    assert e_sp < 0.05 * e_li
+    np.testing.assert_allclose(np.asarray(jax.vmap(lambda s: sp(s)[1][0])(jnp.asarray(t))), f, atol=1e-12)
+    assert float(sp(t[-1] + 1.0)[1][0]) == 0.0  # zero after the last sample, as Sampled
+    # C1 under jit: the derivative matches finite differences
+    g = jax.jit(jax.grad(lambda s: sp(s)[1][0]))
+    for s in (2.03, 4.5, 7.77):
+        fd = (float(sp(s + 1e-6)[1][0]) - float(sp(s - 1e-6)[1][0])) / 2e-6
+        assert float(g(s)) == pytest.approx(fd, rel=1e-5, abs=1e-8)
