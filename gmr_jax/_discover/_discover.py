@@ -114,13 +114,12 @@ def smooth_input(u: np.ndarray, dt: float) -> np.ndarray:
     return out
 
 
-def _simulate_x(model, rec: Recording, eps):
-    """Simulated x of `model` under the recording's (smoothed) inputs from its recorded initial
-    state: (x or None, why not)."""
+def _simulate_x(model, rec: Recording, eps, k: int):
+    """Simulated x of `model` under the recording's (smoothed) inputs from its recorded state at
+    sample `k` (`sim_start`): (x or None, why not)."""
     d = model.n_dof
     b, f = rec.inputs()
     b, f = smooth_input(b, rec.dt), smooth_input(f, rec.dt)
-    k = sim_start(rec)
     inp = sampled_spline(rec.t, b, f, d)
     # a step budget that grows with the record (at least 20 steps per sample)
     integ = SIM if 20 * rec.n_samples <= SIM.max_steps else Integrator(
@@ -158,13 +157,10 @@ def _form_reason(asked, form, estimated, clear, decimate) -> str:
             "(test-function integrals need no acceleration)")
 
 
-def _has_restoring_dof(model, i) -> bool:
+def _free_dofs(model) -> list[int]:
+    """DOFs with no restoring (position-dependent) force: nothing holds them in place."""
     k = np.asarray(model.stiffness)
-    return k.shape[1] > 1 and bool(np.any(k[i, 1:] != 0))
-
-
-def _has_restoring(model) -> bool:
-    return all(_has_restoring_dof(model, i) for i in range(model.n_dof))
+    return [i for i in range(model.n_dof) if k.shape[1] < 2 or not np.any(k[i, 1:] != 0)]
 
 
 def holdout_errors(model, recs, settings: dict, error: str = "auto") -> dict:
@@ -182,8 +178,7 @@ def holdout_errors(model, recs, settings: dict, error: str = "auto") -> dict:
            "equation_nrmse_per_dof": np.sqrt(per_dof[:, 0] / per_dof[:, 1]).tolist()}
     if error == "equation":
         out["why_not_output"] = "equation error asked for (error='equation')"
-    elif not _has_restoring(model):
-        free = [i for i in range(model.n_dof) if not _has_restoring_dof(model, i)]
+    elif free := _free_dofs(model):
         out["why_not_output"] = (
             f"the model has no restoring (position-dependent) force on DOF {', '.join(map(str, free))}: under the "
             f"recorded input alone its position has no equilibrium to return to and drifts. A plant held in "
@@ -194,13 +189,14 @@ def holdout_errors(model, recs, settings: dict, error: str = "auto") -> dict:
         sims = []
         for r in recs:
             eps = 1e-3 * float(np.sqrt(np.mean(r.v**2)))
-            x, why = _simulate_x(model, r, eps)
+            k = sim_start(r)
+            x, why = _simulate_x(model, r, eps, k)
             if x is None:
                 sims = None
                 out["why_not_output"] = why
                 break
             sims.append(x)
-            xm = r.x[sim_start(r):]
+            xm = r.x[k:]
             num += np.sum((x - xm) ** 2)
             den += np.sum((xm - xm.mean(0)) ** 2)
         if sims is not None:
@@ -272,11 +268,11 @@ def discover(
     for r in recs + hold:
         if r.n_dof != d:
             raise GMRInputError(f"{r.name}: has {r.n_dof} DOFs but the model has {d}")
-    estimated = any(r.a is None or "a" in r.derived for r in recs)
-    # the automatic derivative windows, and whether every estimated signal stands clear of its
-    # noise floor far above its band edge (then its estimated acceleration is trustworthy)
+    # the automatic derivative windows of the signals whose a is estimated, and whether every
+    # one stands clear of its noise floor far above its band edge (then its a is trustworthy)
     windows = {f"{r.name}[{k}]": window_choice(r.x[:, k], r.dt) for r in recs
                if r.a is None or "a" in r.derived for k in range(r.n_dof)}
+    estimated = bool(windows)
     clear = estimated and all(c["rule"] == "noise floor" for c in windows.values())
     form_asked = form
     if form == "auto":

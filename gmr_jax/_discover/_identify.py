@@ -180,10 +180,10 @@ def ambiguous(B: np.ndarray, Xc: np.ndarray, kept: list[int], y: np.ndarray, n_e
         for j in range(Xc.shape[1]):
             if j in kept:
                 continue
-            swap = full.copy()
-            swap[:, B.shape[1] + pos] = Xc[:, j]
             if abs(float(R[:, k] @ R[:, j])) < SWAP_CORR:
                 continue
+            swap = full.copy()
+            swap[:, B.shape[1] + pos] = Xc[:, j]
             d = (_rss(swap, y) - rss) / max(s2, 1e-300)
             if d < crit and (best is None or d < best[0]):
                 best = (d, j)

@@ -48,11 +48,12 @@ def band_edge(x: np.ndarray, dt: float, fraction: float = 0.995) -> float:
 FLOOR_RATIO = 10.0
 
 
-def noise_cutoff(x: np.ndarray, dt: float) -> float:
+def noise_cutoff(x: np.ndarray, dt: float, f_band: float | None = None) -> float:
     """Frequency (Hz) at which the Welch spectrum of x (mean removed; segments of up to 2048
     samples, running median over 9 bins against isolated lines) first falls below `FLOOR_RATIO`
     times the noise floor (the median level of the top fifth of the band), searching upwards
-    from the 99.5 % band edge; the Nyquist frequency when it never does."""
+    from the 99.5 % band edge (`f_band`, computed when not given); the Nyquist frequency when it
+    never does."""
     from scipy.ndimage import median_filter
     from scipy.signal import welch
 
@@ -64,7 +65,8 @@ def noise_cutoff(x: np.ndarray, dt: float) -> float:
         return float(f[-1])
     p = median_filter(p, size=9, mode="nearest")
     floor = float(np.median(p[f >= 0.8 * f[-1]]))
-    below = np.nonzero((p < FLOOR_RATIO * floor) & (f >= band_edge(x, dt)))[0]
+    f_band = band_edge(x, dt) if f_band is None else f_band
+    below = np.nonzero((p < FLOOR_RATIO * floor) & (f >= f_band))[0]
     return float(f[below[0]]) if below.size else float(f[-1])
 
 
@@ -81,7 +83,7 @@ def window_choice(x: np.ndarray, dt: float, polyorder: int = 5) -> dict:
     f = band_edge(x, dt)
     period = 1.0 / f if f > 0 else dominant_period(x, dt)
     w_band = _odd_window(0.3 * period / dt, x.size, polyorder)
-    fc = noise_cutoff(x, dt)
+    fc = noise_cutoff(x, dt, f)
     frac = min(fc * 2 * dt, 1.0)
     w_noise = _odd_window(2 * (((polyorder + 1) / max(frac, 1e-12) + 4.6) / 3.2) + 1, x.size, polyorder)
     rule = "noise floor" if w_noise < w_band else "band edge"

@@ -13,7 +13,7 @@ FIELDS = ("t", "x", "v", "a", "base_acc", "force", "masses")
 _TOKEN = re.compile(r"\s*([*/])\s*")
 
 
-def _squeeze(v) -> np.ndarray:
+def squeeze(v) -> np.ndarray:
     """A stored value as a signal: a 1x1 matrix (a gain) is a number, a column or row vector (N,)."""
     v = np.asarray(v, float)
     if v.size == 1:
@@ -51,7 +51,7 @@ def _evaluate(expr: str, variables: dict, field: str, src: str):
             op = tok
             continue
         if tok in variables:
-            term = _squeeze(variables[tok])
+            term = squeeze(variables[tok])
         else:
             try:
                 term = np.asarray(float(tok))
@@ -83,7 +83,7 @@ def map_columns(variables: dict, columns: dict | None, src: str) -> dict:
             else:
                 out[field] = _evaluate(str(spec), variables, field, src)
         elif field in variables:
-            out[field] = _squeeze(variables[field])
+            out[field] = squeeze(variables[field])
     for need in ("t", "x"):
         if need not in out:
             raise GMRInputError(f"{src}: no '{need}': the file has {sorted(variables)}; map one, e.g. "

@@ -21,11 +21,11 @@ automatic Savitzky-Golay window (hundreds of samples, set by the slow trajectory
 from importlib import resources
 
 import numpy as np
-import scipy.io
 from scipy.signal import butter, filtfilt
 from scipy.signal import decimate as _sp_decimate
 
 from .._errors import GMRInputError
+from .._recordings._mapping import read_mat, squeeze
 from .._recordings._recording import Recording, validate
 
 FILES = {"estimation": "DATA_EMPS.mat", "validation": "DATA_EMPS_PULSES.mat"}
@@ -62,14 +62,8 @@ def emps_raw(which: str = "estimation") -> dict:
     name = FILES[_check_which(which)]
     ref = resources.files("gmr_jax.data").joinpath("emps", name)
     with resources.as_file(ref) as path:
-        mat = scipy.io.loadmat(str(path))
-    out = {}
-    for key, val in mat.items():
-        if key.startswith("__"):
-            continue
-        arr = np.asarray(val, dtype=np.float64)
-        out[key] = float(arr.reshape(-1)[0]) if arr.size == 1 else arr.reshape(-1)
-    return out
+        mat = read_mat(path, name)
+    return {key: float(v) if v.ndim == 0 else v.reshape(-1) for key, v in ((k, squeeze(a)) for k, a in mat.items())}
 
 
 def lowpass_derivatives(
