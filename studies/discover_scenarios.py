@@ -45,6 +45,8 @@ def t(dof, fam, order, c):
 
 SDOF = (t(0, S, 1, K), t(0, V, 1, C))
 DUFF = SDOF + (t(0, S, 3, 0.2 * K / 0.27**2),)
+PLANT = (t(0, V, 1, C),)  # a mass and viscous damping, no spring: held by a position controller
+PD = (K, 2 * 0.3 * np.sqrt(K))  # the controller's (Kp, Kd): closed loop at 2 Hz, 30 % damped
 CH2 = (t(0, S, 1, 300.0), t(0, V, 1, 1.5), t(1, S, 1, 200.0), t(1, V, 1, 1.0))
 CH3 = (t(0, S, 1, 400.0), t(0, V, 1, 1.5), t(1, S, 1, 300.0), t(1, V, 1, 1.2), t(2, S, 1, 200.0),
        t(2, V, 1, 1.0))
@@ -80,6 +82,17 @@ SCENARIOS = [
     # quadratic drag at one forcing frequency, large and clean: 98 % of its column is viscous
     # (VIF ~26), but the harmonics it adds are determined at 50 dB, so it must be named
     sd("sdof_quadratic_drag_one_frequency_xva_50dB", (V, 2), 0.30, (V, 1), 50, "xva", band=(2.5, 2.5)),
+    # lab sensors: a laser vibrometer (velocity only) or accelerometers (acceleration only), with
+    # the force; x is integrated and its equilibrium offset is unobservable (placed by the model)
+    sd("sdof_coulomb_in_viscous_v_only_50dB", (V, 0), 0.15, (V, 1), 50, "v"),
+    sd("sdof_cubic_in_linear_v_only_50dB", (S, 3), 0.10, (S, 1), 50, "v"),
+    sd("sdof_coulomb_in_viscous_a_only_50dB", (V, 0), 0.15, (V, 1), 50, "a"),
+    sd("sdof_cubic_in_linear_a_only_50dB", (S, 3), 0.10, (S, 1), 50, "a"),
+    # a closed-loop plant (no spring: a position controller holds it, as the EMPS drive); the
+    # recorded force is the controller's output; only equation error is possible for the plant
+    sd("sdof_closed_loop_coulomb_in_viscous_x_50dB", (V, 0), 0.15, (V, 1), 50, "x", terms=PLANT, controller=PD),
+    # time stamps stored as float32 (put back on the uniform grid within their rounding)
+    sd("sdof_coulomb_in_viscous_float32_time_xva_50dB", (V, 0), 0.15, (V, 1), 50, "xva", time_dtype="float32"),
 ]
 #: the effect is there but these data cannot name it (one forcing frequency): the right answer is
 #: no finding, with the effect's term listed as not separable
@@ -99,6 +112,9 @@ CONTROLS = [
     sd("control_sdof_duffing_x_40dB", None, 0, None, 40, "x", terms=DUFF),
     ch("control_chain2_base_xva_50dB", (1.0, 1.0), CH2, None, 0, None, 50, "xva", "base", 5.0),
     sd("control_sdof_with_coulomb_xva_60dB", None, 0, None, 60, "xva", terms=SDOF + (t(0, V, 0, 1.0),)),
+    sd("control_sdof_v_only_40dB", None, 0, None, 40, "v"),
+    sd("control_sdof_duffing_a_only_50dB", None, 0, None, 50, "a", terms=DUFF),
+    sd("control_closed_loop_plant_x_50dB", None, 0, None, 50, "x", terms=PLANT + (t(0, V, 0, 1.0),), controller=PD),
 ]
 
 

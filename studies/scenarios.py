@@ -48,7 +48,7 @@ class Scenario:
     terms: tuple
     effect: tuple | None
     snr_db: float = 50.0
-    measured: str = "xva"  # or "x": displacement and inputs only
+    measured: str = "xva"  # "x": displacement and inputs only; "v" / "a": velocity / acceleration only
     excite: str = "force"
     amplitude: float = 1.0
     band: tuple = (0.3, 6.0)
@@ -57,6 +57,10 @@ class Scenario:
     seed: int = 0
     sign_eps: float = 1e-4
     noise_seed: int = 0  # 0: the original noise draw; k > 0: another draw, same inputs and truth
+    time_dtype: str = "float64"  # "float32": time stamps stored in single precision (a logger's column)
+    # closed loop: a position controller (Kp, Kd) drives the plant to a multisine reference; the
+    # recorded force is the controller's output Kp (r - x) - Kd v (the EMPS drive's situation)
+    controller: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -69,6 +73,19 @@ class Clean:
     a: np.ndarray
     base_acc: np.ndarray
     force: np.ndarray
+    drive: np.ndarray | None = None  # closed loop: the reference force Kp r on the last mass
+
+
+def closed_loop(model, sc: Scenario):
+    """The plant with its controller: stiffness Kp and viscous damping Kd added on the last DOF."""
+    if sc.controller is None:
+        return model
+    kp, kd = sc.controller
+    d = model.n_dof - 1
+    return from_terms(model.masses, model.terms() + [
+        {"dof": d, "physics": "stiffness", "order": 1, "coefficient": kp},
+        {"dof": d, "physics": "velocity_damping", "order": 1, "coefficient": kd}], model.topology,
+        duplicates="add")
 
 
 def multisine(t, band, rms, seed):
@@ -94,16 +111,23 @@ def _simulate_run(model, sc: Scenario, seed: int):
         b, f = np.zeros(t.size), np.zeros((t.size, d))
         f[:, -1] = u
     inp = Sampled(jnp.asarray(t), jnp.asarray(b), jnp.asarray(f), n_dof=d)
-    sol = simulate(model.with_sign_eps(sc.sign_eps), inp, jnp.asarray(t), jnp.zeros(d),
+    cl = closed_loop(model, sc)
+    sol = simulate(cl.with_sign_eps(sc.sign_eps), inp, jnp.asarray(t), jnp.zeros(d),
                    integrator=SIM, throw=False)
     x, v = (np.asarray(z) for z in sol.value)
     if not np.all(np.isfinite(x)):
         raise RuntimeError(f"{sc.name}: truth simulation failed")
-    m = model.with_sign_eps(sc.sign_eps)
+    m = cl.with_sign_eps(sc.sign_eps)
     xdd = np.asarray(jax.vmap(m.accelerations)(jnp.asarray(x), jnp.asarray(v), jnp.asarray(b),
                                                jnp.asarray(f)))
     a = np.asarray(model.absolute_accelerations(jnp.asarray(xdd), jnp.asarray(b)))
-    return t, x, v, a, b, f
+    if sc.controller is not None:  # the plant's force: the controller's output
+        kp, kd = sc.controller
+        drive = f
+        f = drive.copy()
+        f[:, -1] = drive[:, -1] - kp * x[:, -1] - kd * v[:, -1]
+        return t, x, v, a, b, f, drive
+    return t, x, v, a, b, f, None
 
 
 def _noise_rng(sc: Scenario, seed: int) -> np.random.Generator:
@@ -119,9 +143,12 @@ def record(sc: Scenario, model, seed: int, name: str) -> Recording:
 
 def record_with_clean(sc: Scenario, model, seed: int, name: str) -> tuple[Recording, Clean]:
     """`record` and the noise-free signals it was made from."""
-    t, x, v, a, b, f = _simulate_run(model, sc, seed)
+    t, x, v, a, b, f, drive = _simulate_run(model, sc, seed)
     rng = _noise_rng(sc, seed)
-    sig = {"x": add_noise(x, sc.snr_db, rng)}
+    if sc.measured in ("v", "a"):  # a velocity- or acceleration-only sensor
+        sig = {sc.measured: add_noise({"v": v, "a": a}[sc.measured], sc.snr_db, rng)}
+    else:
+        sig = {"x": add_noise(x, sc.snr_db, rng)}
     if sc.measured == "xva":
         sig["v"] = add_noise(v, sc.snr_db, rng)
         sig["a"] = add_noise(a, sc.snr_db, rng)
@@ -131,8 +158,8 @@ def record_with_clean(sc: Scenario, model, seed: int, name: str) -> tuple[Record
         fn = f.copy()
         fn[:, -1] = add_noise(f[:, -1], sc.snr_db, rng)
         sig["force"] = fn
-    rec = Recording(t=t, masses=np.asarray(sc.masses, float), name=name, **sig)
-    return rec, Clean(t=t, x=x, v=v, a=a, base_acc=b, force=f)
+    rec = Recording(t=t.astype(sc.time_dtype), masses=np.asarray(sc.masses, float), name=name, **sig)
+    return rec, Clean(t=t, x=x, v=v, a=a, base_acc=b, force=f, drive=drive)
 
 
 def effect_coefficient(sc: Scenario, base_model) -> float:
@@ -258,7 +285,7 @@ def build_full(sc: Scenario, n_estimation: int = 2, n_holdout: int = 1) -> Built
            for k in range(n_estimation)]
     hold = [record_with_clean(sc, truth, sc.seed + 500 + 10 * k, f"{sc.name}_hold{k}")
             for k in range(n_holdout)]
-    form = "weak" if sc.measured == "x" else "strong"
+    form = "weak" if sc.measured in ("x", "v") else "strong"
     done = [r.complete(sc.topology) for r, _ in est]
     model = calibrate(list(sc.terms), sc.masses, sc.topology, done, form)
     return Built(truth, model, [r for r, _ in est], [r for r, _ in hold], c_eff,
@@ -271,10 +298,11 @@ def model_error(model, clean: list, sc: Scenario) -> float:
     the truth's sign smoothing, against the noise-free truth response; 0 for the truth itself.
     nan when the model cannot be simulated."""
     num = den = 0.0
-    m = model.with_sign_eps(sc.sign_eps)
+    m = closed_loop(model, sc).with_sign_eps(sc.sign_eps)
     for c in clean:
         d = model.n_dof
-        inp = Sampled(jnp.asarray(c.t), jnp.asarray(c.base_acc), jnp.asarray(c.force), n_dof=d)
+        f = c.force if c.drive is None else c.drive  # closed loop: the controller simulated with it
+        inp = Sampled(jnp.asarray(c.t), jnp.asarray(c.base_acc), jnp.asarray(f), n_dof=d)
         sol = simulate(m, inp, jnp.asarray(c.t), jnp.zeros(d), integrator=SIM, throw=False)
         x = np.asarray(sol.value[0])
         if not np.all(np.isfinite(x)):

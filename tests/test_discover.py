@@ -188,3 +188,36 @@ def test_emps_through_discover():
     assert abs(fv - 203.5034) < 0.1 * 203.5034
     assert rep.before["kind"] == "equation" and rep.before["nrmse"] > 0.15
     assert rep.after["nrmse"] < 0.08
+
+
+def test_velocity_only_recordings_find_coulomb_and_hold_the_offset():
+    """A laser vibrometer (v only) and the force: x is integrated, its equilibrium placed by the
+    model (one stable root), Coulomb friction found, preload listed as not separable from the
+    unobservable offset; the before/after is output error on the integrated x."""
+    from studies.discover_scenarios import SCENARIOS
+
+    sc = [s for s in SCENARIOS if s.name == "sdof_coulomb_in_viscous_v_only_50dB"][0]
+    b = build_full(sc)
+    assert all("x" in r.derived for r in b.est)
+    rep = gmr_jax.discover(b.model, b.est, b.hold, rule=RULE).value
+    assert [(f["dof"], f["physics"]) for f in rep.findings] == [(0, "coulomb_friction")]
+    assert abs(rep.findings[0]["coefficient"] - b.c_eff) <= 0.2 * b.c_eff
+    assert [(e["physics"], e["with"]) for e in rep.not_separable] == [("preload", "the equilibrium offset of x")]
+    assert len(rep.settings["equilibria_placed"]) == 2 and rep.settings["integrated"]
+    assert rep.before["kind"] == "output" and rep.after["nrmse"] < 0.5 * rep.before["nrmse"]
+    assert model_error(rep.model, b.hold_clean, sc) < 0.5 * model_error(b.model, b.hold_clean, sc)
+
+
+def test_velocity_only_on_a_bistable_model_asks_for_the_equilibrium(rng):
+    """Two stable wells could hold the record: the tool cannot say which and asks."""
+    t = np.arange(3000) * 5e-3
+    v = np.sin(2 * np.pi * 1.3 * t) + 0.3 * np.sin(2 * np.pi * 3.1 * t)
+    rec = gmr_jax.Recording(t=t, v=v, force=0.1 * np.sin(2 * np.pi * 1.3 * t), masses=[1.0], name="vib")
+    model = gmr_jax.from_terms([1.0], [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -100.0},
+                                       {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 100.0},
+                                       {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.5}])
+    with pytest.raises(gmr_jax.GMRInputError, match="2 stable equilibria.*give the recording's 'equilibrium'"):
+        gmr_jax.discover(model, [rec], rule=RULE)
+    placed = replace(rec, x=None, v=np.asarray(v)[:, None], derived=(), integration=None, equilibrium=[1.0])
+    rep = gmr_jax.discover(model, [placed], rule=RULE, error="equation").value
+    assert rep.settings["equilibria_placed"] == []

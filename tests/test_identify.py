@@ -129,3 +129,14 @@ def test_spring_against_mass_at_one_frequency_is_not_a_finding_and_a_worse_refit
     assert rep.after["nrmse"] > rep.before["nrmse"]
     assert rep.warnings and "keep the given model" in rep.warnings[0]
     assert "warning: the augmented model is worse" in rep.summary()
+
+
+def test_weak_rows_ignore_a_constant_offset_of_x():
+    """The sampled psi'' sums to zero (as its integral does), so a constant added to x (an
+    unobserved equilibrium) changes no inertia row of the weak form."""
+    from gmr_jax._discover._equation import test_functions
+
+    for support in (15, 41, 201):
+        psi, d2 = test_functions(support, 1e-3)
+        assert abs(d2.sum()) <= 1e-12 * np.abs(d2).sum()
+        assert d2[0] == 0.0 and d2[-1] == 0.0

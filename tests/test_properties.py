@@ -619,7 +619,7 @@ def _unfaithful_recording(stored: dict, rec) -> list[str]:
     for key in REC_KEYS:
         a = getattr(rec, key)
         if key not in stored:
-            if a is not None:
+            if a is not None and key not in rec.derived:  # x (and v) integrated from v or a: contracts
                 why.append(f"{key} appeared")
             continue
         s = stored[key]

@@ -237,3 +237,84 @@ def test_sampled_spline_input_is_smooth_and_matches_a_band_limited_signal():
     for s in (2.03, 4.5, 7.77):
         fd = (float(sp(s + 1e-6)[1][0]) - float(sp(s - 1e-6)[1][0])) / 2e-6
         assert float(g(s)) == pytest.approx(fd, rel=1e-5, abs=1e-8)
+
+
+def _oscillation(rng, n=8000, dt=5e-3):
+    """A broadband motion (random-phase multisine, every line 0.5-5 Hz at 1/record length
+    spacing, flat in x) that starts and ends anywhere (x, v, a exact)."""
+    t = np.arange(n) * dt
+    T = n * dt
+    f = np.arange(int(0.5 * T), int(5 * T) + 1) / T + 0.37 / T  # off the record's own grid
+    ph = rng.uniform(0, 2 * np.pi, f.size)
+    amp = np.full(f.size, 1.0 / np.sqrt(f.size))
+    w = 2 * np.pi * f
+    x = (amp * np.sin(w * t[:, None] + ph)).sum(1)
+    v = (amp * w * np.cos(w * t[:, None] + ph)).sum(1)
+    a = -(amp * w**2 * np.sin(w * t[:, None] + ph)).sum(1)
+    return t, x, v, a
+
+
+@pytest.mark.parametrize("sensor", ["v", "a"])
+def test_velocity_or_acceleration_only_sensors_are_integrated(rng, sensor, tmp_path):
+    """x (and v from a) integrated with drift removal: a sensor bias and 50 dB noise leave the
+    displacement within 4 % (mean removed: the equilibrium is unobservable; most of the error is
+    the record's own straight-line / parabola trend, removed with the bias's ramp: ~2-3 % on
+    40 s of a 0.5-5 Hz band)."""
+    t, x, v, a = _oscillation(rng)
+    sig = {"v": v, "a": a}[sensor]
+    meas = sig + 0.02 * np.std(sig) + g.add_noise(sig, 50.0, rng) - sig  # a bias and noise
+    rec = g.Recording(t=t, force=np.zeros_like(t), **{sensor: meas}, name="lab")
+    assert rec.derived == (("x",) if sensor == "v" else ("x", "v")), rec.derived
+    assert rec.integration["from"] == sensor and "unobservable" in rec.integration["equilibrium"]
+    assert not rec.equilibrium_observed
+    xc = x - x.mean()
+    assert np.linalg.norm(rec.x[:, 0] - xc) <= 0.04 * np.linalg.norm(xc)
+    assert abs(rec.x.mean()) < 1e-12
+    if sensor == "a":
+        assert np.linalg.norm(rec.v[:, 0] - v) <= 0.04 * np.linalg.norm(v)
+    full = rec.complete("independent")
+    assert full.derived == ("x", "a") if sensor == "v" else ("x", "v")
+    if sensor == "v":  # a from one derivative of the measured v
+        assert np.linalg.norm(full.a[:, 0] - a) <= 0.02 * np.linalg.norm(a)
+    # the equilibrium, when given, is where the mean goes; round trip keeps it
+    placed = g.Recording(t=t, force=np.zeros_like(t), equilibrium=0.3, **{sensor: meas})
+    assert placed.equilibrium_observed and placed.x.mean() == pytest.approx(0.3)
+    placed.save(tmp_path / "p.npz")
+    back = g.load_recording(tmp_path / "p.npz")
+    assert set(np.load(tmp_path / "p.npz").files) == {"t", sensor, "force", "equilibrium"}
+    np.testing.assert_allclose(back.x, placed.x, atol=1e-12)
+
+
+def test_velocity_only_csv_and_refusals(rng, tmp_path):
+    t, x, v, a = _oscillation(rng, n=2000)
+    p = tmp_path / "vib.csv"
+    np.savetxt(p, np.stack([t, v, np.zeros_like(t)], 1), delimiter=",", header="t,v0,f0", comments="")
+    rec = g.load_recording(p)
+    assert rec.derived == ("x",) and rec.n_dof == 1
+    with pytest.raises(g.GMRInputError, match="'equilibrium' is for velocity- or acceleration-only"):
+        g.Recording(t=t, x=x, equilibrium=0.1)
+    with pytest.raises(g.GMRInputError, match="'x' is required"):
+        g.Recording(t=t, force=np.zeros_like(t))
+    vn = v.copy()
+    vn[5] = np.nan
+    with pytest.raises(g.GMRInputError, match="'v' has 1 NaN"):
+        g.Recording(t=t, v=vn)
+    # a global fit needs each equilibrium's position: refused, with the fix named
+    with pytest.raises(g.GMRInputError, match="equilibrium it vibrated about is unobservable.*'equilibrium'"):
+        g.reconstruct([rec, rec])
+
+
+def test_acceleration_only_chain_becomes_cell_deformations(rng):
+    """Accelerometers on the masses of a 2-cell chain: integrated mass displacements become cell
+    deformations (x_1 = y_1 - y_0) for a chain, stay mass displacements when independent."""
+    t, y0, _, a0 = _oscillation(rng)
+    _, y1, _, a1 = _oscillation(rng)
+    rec = g.Recording(t=t, a=np.stack([a0, a1], 1), force=np.zeros((t.size, 2)))
+    chain = rec.complete("chain")
+    d1 = (y1 - y1.mean()) - (y0 - y0.mean())
+    assert np.linalg.norm(chain.x[:, 1] - d1) <= 0.02 * np.linalg.norm(d1)
+    assert "cell deformations" in chain.integration["coordinates"]
+    ind = rec.complete("independent")
+    np.testing.assert_allclose(ind.x, rec.x)
+    # idempotent: completing twice does not difference twice
+    np.testing.assert_allclose(chain.complete("chain").x, chain.x)

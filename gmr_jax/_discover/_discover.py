@@ -40,6 +40,7 @@ from ._equation import dof_rows
 from ._identify import (MASS_RANGE, VIF_MAX, DofIdentifiability, ambiguous, closest, collinear_entry, determined,
                         explained, homogeneous, mass_believable, screen, separability_entry, vif)
 from ._locate import locate, where_sentence
+from ._offset import comparable, place, preload_entry, unobserved
 from ._select import SelectionRule, select_terms
 
 SIM = Integrator(rtol=1e-7, atol=1e-10, max_steps=400_000)
@@ -147,14 +148,14 @@ def _form_reason(asked, form, estimated, clear, decimate) -> str:
     if asked != "auto":
         return f"{form}: asked for"
     if not estimated:
-        return "strong: x, v and a recorded"
+        return "strong: the acceleration was recorded"
     if decimate > 1:
         return "strong: decimate > 1 asked for (parallel low-pass of every column)"
     if clear:
         return ("strong: every estimated signal stands 10 dB above its noise floor far beyond its band edge "
                 "(the derivative window was set by the noise floor), so its acceleration is usable")
-    return ("weak: the acceleration was estimated and the noise floor starts near the band edge of x "
-            "(test-function integrals need no acceleration)")
+    return ("weak: the acceleration was estimated and the noise floor of the signal it comes from starts near "
+            "its band edge (test-function integrals need no acceleration)")
 
 
 def _free_dofs(model) -> list[int]:
@@ -164,7 +165,9 @@ def _free_dofs(model) -> list[int]:
 
 
 def holdout_errors(model, recs, settings: dict, error: str = "auto") -> dict:
-    """Equation error (and output error when it can simulate) of `model` on completed `recs`."""
+    """Equation error (and output error when it can simulate) of `model` on completed `recs`
+    (an unobserved equilibrium placed by `model` itself, `_offset`)."""
+    recs, _ = place(model, recs)
     eq_num = eq_den = 0.0
     per_dof = np.zeros((model.n_dof, 2))
     for r in recs:
@@ -195,8 +198,10 @@ def holdout_errors(model, recs, settings: dict, error: str = "auto") -> dict:
                 sims = None
                 out["why_not_output"] = why
                 break
-            sims.append(x)
             xm = r.x[k:]
+            if "x" in r.derived:  # integrated x: compare what the integration keeps
+                x, xm = comparable(r, x), comparable(r, xm)
+            sims.append(x)
             num += np.sum((x - xm) ** 2)
             den += np.sum((xm - xm.mean(0)) ** 2)
         if sims is not None:
@@ -270,7 +275,7 @@ def discover(
             raise GMRInputError(f"{r.name}: has {r.n_dof} DOFs but the model has {d}")
     # the automatic derivative windows of the signals whose a is estimated, and whether every
     # one stands clear of its noise floor far above its band edge (then its a is trustworthy)
-    windows = {f"{r.name}[{k}]": window_choice(r.x[:, k], r.dt) for r in recs
+    windows = {f"{r.name}[{k}]": window_choice(getattr(r, r.derivative_source())[:, k], r.dt) for r in recs
                if r.a is None or "a" in r.derived for k in range(r.n_dof)}
     estimated = bool(windows)
     clear = estimated and all(c["rule"] == "noise floor" for c in windows.values())
@@ -288,6 +293,8 @@ def discover(
                             "enter several cells' equations)")
     recs = [r.complete(model.topology) for r in recs]
     hold_c = [r.complete(model.topology) for r in hold] if hold else recs
+    unseen = [r.name for r in recs if unobserved(r)]
+    recs, placed = place(model, recs)
     catalogue = default_catalogue(d) if catalogue is None else list(catalogue)
     settings = {"form": form, "support": support, "decimate": int(decimate),
                 "refit_masses": bool(refit_masses), "derivatives":
@@ -297,6 +304,9 @@ def discover(
                     "; weak form: no acceleration used" if form == "weak" else ""),
                 "derivative_windows": windows, "form_reason": _form_reason(form_asked, form, estimated, clear,
                                                                             decimate),
+                "integrated": {r.name: {k: v for k, v in r.integration.items() if k != "offset"}
+                               for r in recs + hold_c if r.integration},
+                "equilibria_placed": placed,
                 "rule": rule.__dict__, "holdout": [r.name for r in hold] or "estimation recordings "
                 "(no holdout given)", "estimation": [r.name for r in recs]}
 
@@ -306,7 +316,8 @@ def discover(
     for i in range(d):
         base = model_terms(model, i)
         cands = [t for t in catalogue if t.dof == i and t not in base
-                 and not (t.family == "position_damping" and t.order == 0)]
+                 and not (t.family == "position_damping" and t.order == 0)
+                 and not (unseen and t.family == "stiffness" and t.order == 0)]
         terms = base + cands
         rows = [dof_rows(r, model, i, terms, form=form, support=support, decimate=decimate,
                          mass_column=refit_masses) for r in recs]
@@ -384,7 +395,7 @@ def discover(
                 f"data do not fix the mass); held at {m_i:.6g} and the DOF refitted")
             refit_i = False
             keep, ns, vifs, sel = select(False)
-        ident.not_separable = [dict(e, dof=i) for e in ns]
+        ident.not_separable = [dict(e, dof=i) for e in ns] + ([preload_entry(i, unseen)] if unseen else [])
         ident.vif = vifs
         identifiability.append(ident)
         cands = [cands[j] for j in keep]

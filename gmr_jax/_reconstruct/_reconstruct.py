@@ -43,6 +43,12 @@ def _resolve(recordings, masses, topology, min_recordings=2, what="fit"):
     recs = [validate(r, r.name) for r in recordings]
     d = recs[0].n_dof
     for r in recs:
+        if not r.equilibrium_observed:
+            raise GMRInputError(
+                f"{r.name}: x was integrated from {r.integration['from']} (no displacement sensor), so the "
+                f"equilibrium it vibrated about is unobservable; a global model needs where each equilibrium "
+                f"is: give it as the recording's 'equilibrium' (NPZ key, Recording(equilibrium=...), or "
+                f"--columns equilibrium=VALUE), or record x")
         if r.n_dof != d:
             raise GMRInputError(f"{r.name}: has {r.n_dof} DOFs but {recs[0].name} has {d}")
     topology = as_topology(("chain" if d > 1 else "independent") if topology is None else topology)

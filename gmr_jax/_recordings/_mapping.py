@@ -9,7 +9,7 @@ import numpy as np
 from .._errors import GMRInputError
 
 #: The recording's fields a mapping may set (as `Recording`).
-FIELDS = ("t", "x", "v", "a", "base_acc", "force", "masses")
+FIELDS = ("t", "x", "v", "a", "base_acc", "force", "masses", "equilibrium")
 _TOKEN = re.compile(r"\s*([*/])\s*")
 
 
@@ -85,11 +85,13 @@ def map_columns(variables: dict, columns: dict | None, src: str) -> dict:
         elif field in variables:
             out[field] = squeeze(variables[field])
     for need in ("t", "x"):
+        if need == "x" and ("v" in out or "a" in out):
+            continue  # velocity- or acceleration-only sensors: x is integrated
         if need not in out:
             raise GMRInputError(f"{src}: no '{need}': the file has {sorted(variables)}; map one, e.g. "
                                 f"columns={{'{need}': '<name>'}} (CLI: --columns {need}=<name>)")
     n = np.shape(out["t"])[0] if np.ndim(out["t"]) else 0
     for field, val in out.items():  # a scalar scale alone (e.g. force=gtau) is a mistake, not a signal
-        if field != "masses" and np.ndim(val) == 0:
+        if field not in ("masses", "equilibrium") and np.ndim(val) == 0:
             raise GMRInputError(f"{src}: column mapping gives a single number for '{field}', not {n} samples")
     return out

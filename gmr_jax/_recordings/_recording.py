@@ -12,6 +12,7 @@ import numpy as np
 from .._errors import GMRDataWarning, GMRInputError, describe, is_tracer
 from .._topology import as_topology
 from ._derivatives import differentiate
+from ._integrate import integrated_signals
 
 MIN_SAMPLES = 64
 
@@ -22,6 +23,13 @@ class Recording:
     first); optional `v`, `a` (absolute accelerations of the masses), inputs `base_acc` (N,) or
     `force` (N, D), optional `masses` (D,). `derived` lists the signals estimated, not measured.
 
+    Velocity- or acceleration-only sensors: give `v` or `a` without `x`; x (and v from a) is
+    integrated with drift removal (`_integrate`), listed in `derived`, and described in
+    `integration` (source, high-pass cut-off, equilibrium). The integrated x has zero mean: the
+    equilibrium it vibrates about is unobservable unless given as `equilibrium` (D,), where the
+    mean of x is then put. From `a` alone, x holds each mass's displacement relative to the base
+    until `complete(topology)` makes chain cell deformations of it.
+
     Construction checks types and shapes (float arrays, not integer, boolean or object ones;
     one length N; D columns in x, v, a, force; D masses; a 1-D x, v, a or force is one DOF)
     and raises `GMRInputError`; values (NaN, sampling, length) are checked by `validate`, which
@@ -29,7 +37,7 @@ class Recording:
     """
 
     t: np.ndarray
-    x: np.ndarray
+    x: np.ndarray | None = None
     v: np.ndarray | None = None
     a: np.ndarray | None = None
     base_acc: np.ndarray | None = None
@@ -37,6 +45,8 @@ class Recording:
     masses: np.ndarray | None = None
     name: str = "recording"
     derived: tuple = field(default_factory=tuple)
+    equilibrium: np.ndarray | None = None
+    integration: dict | None = field(default=None, compare=False)
 
     def __post_init__(self):
         _check_fields(self)
@@ -46,8 +56,15 @@ class Recording:
                 object.__setattr__(self, key, val[:, None])
         if self.base_acc is not None and np.ndim(self.base_acc) == 2:  # (N, 1)
             object.__setattr__(self, "base_acc", self.base_acc[:, 0])
-        if self.masses is not None and np.ndim(self.masses) == 0:  # one DOF
-            object.__setattr__(self, "masses", np.reshape(np.asarray(self.masses), (1,)))
+        for key in ("masses", "equilibrium"):
+            if getattr(self, key) is not None and np.ndim(getattr(self, key)) == 0:  # one DOF
+                object.__setattr__(self, key, np.reshape(np.asarray(getattr(self, key), float), (1,)))
+        if self.x is None:
+            self._integrate()
+        elif self.equilibrium is not None and "x" not in self.derived:
+            raise GMRInputError(f"{self.name}: 'equilibrium' is for velocity- or acceleration-only recordings "
+                                f"(x integrated); with x measured, x itself says where the equilibrium is: "
+                                f"drop 'equilibrium'")
         d = np.shape(self.x)[1]
         if d == 0:
             raise GMRInputError(f"{self.name}: 'x' has no columns; give one displacement column per DOF")
@@ -58,6 +75,39 @@ class Recording:
         if self.masses is not None and np.shape(self.masses)[0] != d:
             raise GMRInputError(f"{self.name}: 'masses' has {np.shape(self.masses)[0]} entries but 'x' has {d} "
                                 f"DOFs; give one mass per DOF")
+        if self.equilibrium is not None and np.shape(self.equilibrium)[0] != d:
+            raise GMRInputError(f"{self.name}: 'equilibrium' has {np.shape(self.equilibrium)[0]} entries but "
+                                f"the recording has {d} DOFs; give one static displacement per DOF")
+
+    def _integrate(self):
+        """x (and v from a) integrated from the velocity- or acceleration-only sensors."""
+        x, v, info = integrated_signals(self.t, self.v, self.a, self.base_acc, self.name)
+        derived = tuple(self.derived) + ("x",) + (("v",) if v is not None else ())
+        if self.equilibrium is not None:
+            eq = np.asarray(self.equilibrium, float)
+            if eq.shape != (x.shape[1],) or not np.all(np.isfinite(eq)):
+                raise GMRInputError(f"{self.name}: 'equilibrium' must hold {x.shape[1]} finite number(s) (one "
+                                    f"static displacement per DOF), got {eq.tolist()}")
+            x = x + eq[None, :]
+            info["equilibrium"] = "given"
+        else:
+            info["equilibrium"] = ("unobservable: x has zero mean (the static position is not in v or a); "
+                                   "give 'equilibrium' to place it")
+        object.__setattr__(self, "x", x)
+        if v is not None:
+            object.__setattr__(self, "v", v)
+        object.__setattr__(self, "derived", derived)
+        object.__setattr__(self, "integration", info)
+
+    @property
+    def equilibrium_observed(self) -> bool:
+        """False when x was integrated from v or a and no `equilibrium` was given."""
+        return "x" not in self.derived or self.equilibrium is not None
+
+    def derivative_source(self) -> str:
+        """The signal a missing acceleration is differentiated from: 'v' when x was integrated
+        from a measured v (one derivative of the measurement, not two of its integral), else 'x'."""
+        return "v" if (self.integration or {}).get("from") == "v" else "x"
 
     @property
     def n_samples(self) -> int:
@@ -83,24 +133,38 @@ class Recording:
 
     def complete(self, topology: str = "chain", window: int | None = None) -> "Recording":
         """Fill missing `v` and `a` by Savitzky-Golay differentiation of x (recorded in
-        `derived`). `a` is absolute: x'' plus base acceleration (chain: cumulated over cells)."""
-        v, a, derived = self.v, self.a, list(self.derived)
+        `derived`; of a measured v when x was integrated from it). `a` is absolute: x'' plus base
+        acceleration (chain: cumulated over cells). An acceleration-only recording's integrated
+        mass displacements become cell deformations for a chain."""
+        x, v, a, derived = self.x, self.v, self.a, list(self.derived)
+        info = self.integration
+        topo = as_topology(topology)
+        if info and info.get("from") == "a" and info.get("coordinates", "").startswith("displacement of each"):
+            if topo.name == "chain" and x.shape[1] > 1:  # mass displacements -> cell deformations
+                x = np.diff(x, axis=1, prepend=0.0)
+                v = np.diff(v, axis=1, prepend=0.0)
+            info = {**info, "coordinates": "cell deformations" if topo.name == "chain" else
+                    "displacement of each mass relative to the base"}
+            info["coordinates"] += f" ({topo.name})"
         if v is None:
-            v = differentiate(self.x, self.dt, 1, window)
+            v = differentiate(x, self.dt, 1, window)
             derived.append("v")
         if a is None:
-            xdd = differentiate(self.x, self.dt, 2, window)
+            if self.derivative_source() == "v":
+                xdd = differentiate(v, self.dt, 1, window)
+            else:
+                xdd = differentiate(x, self.dt, 2, window)
             b, _ = self.inputs()
-            a = as_topology(topology).absolute(xdd, b)
+            a = topo.absolute(xdd, b)
             derived.append("a")
-        return replace(self, v=v, a=a, derived=tuple(derived))
+        return replace(self, x=x, v=v, a=a, derived=tuple(derived), integration=info)
 
     def save(self, path) -> None:
         save_recording(self, path)
 
 
-SIGNALS = ("t", "x", "v", "a", "base_acc", "force", "masses")
-_DERIVABLE = ("v", "a")
+SIGNALS = ("t", "x", "v", "a", "base_acc", "force", "masses", "equilibrium")
+_DERIVABLE = ("x", "v", "a")
 
 
 def _check_dtype(name, arr, src):
@@ -126,8 +190,9 @@ def _check_fields(rec: "Recording") -> None:
     for key in SIGNALS:
         val = getattr(rec, key)
         if val is None:
-            if key in ("t", "x"):
-                raise GMRInputError(f"{src}: '{key}' is required (Recording(t=..., x=...))")
+            if key == "t" or (key == "x" and rec.v is None and rec.a is None):
+                raise GMRInputError(f"{src}: '{key}' is required (Recording(t=..., x=...); or v=... or a=... "
+                                    f"without x for velocity- or acceleration-only sensors)")
             continue
         if is_tracer(val):
             continue
@@ -146,12 +211,12 @@ def _check_fields(rec: "Recording") -> None:
             if not (arr.ndim == 1 or (arr.ndim == 2 and arr.shape[1] == 1)):
                 raise GMRInputError(f"{src}: 'base_acc' must be 1-D (N,), one value per sample, got shape "
                                     f"{arr.shape}")
-        elif key == "masses":
+        elif key in ("masses", "equilibrium"):
             if arr.ndim > 1:
-                raise GMRInputError(f"{src}: 'masses' must be 1-D (D,), one per DOF, got shape {arr.shape}")
+                raise GMRInputError(f"{src}: '{key}' must be 1-D (D,), one per DOF, got shape {arr.shape}")
         elif arr.ndim not in (1, 2):
             raise GMRInputError(f"{src}: '{key}' has shape {arr.shape}, expected (N, D) or (N,)")
-        if key != "masses" and n is not None and arr.shape[0] != n:
+        if key not in ("masses", "equilibrium") and n is not None and arr.shape[0] != n:
             raise GMRInputError(f"{src}: '{key}' has shape {arr.shape}, expected {n} samples to match 't' "
                                 f"({n} samples)")
 
@@ -299,7 +364,7 @@ def save_recording(rec: Recording, path) -> None:
             names.append("base_acc")
         np.savetxt(path, np.hstack(cols), delimiter=",", header=",".join(names), comments="")
         return
-    data = {k: getattr(rec, k) for k in ("t", "x", "v", "a", "base_acc", "force", "masses")}
+    data = {k: getattr(rec, k) for k in SIGNALS}
     data = {k: v for k, v in data.items() if v is not None and k not in rec.derived}
     np.savez(path, **data)
 
@@ -315,7 +380,7 @@ def _read_csv(path: Path, src: str, raw: bool = False):
     if not lines or not lines[0].strip():
         raise GMRInputError(f"{src}: the first line must be the header row naming the columns (t, x0, ...)")
     header = [h.strip() for h in next(csv.reader([lines[0]]))]
-    expected = "t, x0.. (one per DOF), optional v0.., a0.., f0.., base_acc"
+    expected = "t, x0.. (one per DOF; or v0.. or a0.. alone), optional v0.., a0.., f0.., base_acc"
 
     def known(h):
         if h in ("t", "base_acc"):
@@ -323,7 +388,7 @@ def _read_csv(path: Path, src: str, raw: bool = False):
         return any(h.startswith(p) and h[len(p):].isdigit() for p in ("x", "v", "a", "f"))
 
     unknown = [] if raw else [h for h in header if not known(h)]
-    if unknown or (not raw and ("t" not in header or "x0" not in header)):
+    if unknown or (not raw and ("t" not in header or not {"x0", "v0", "a0"} & set(header))):
         what = f"unknown column(s) {unknown}" if unknown else "missing column 't' or 'x0'"
         raise GMRInputError(f"{src}: {what}; found columns {header}, expected {expected} "
                             f"(the first line must be this header)")
@@ -383,9 +448,10 @@ def _read_npz(path: Path, src: str, raw: bool = False):
     with z:
         found = sorted(z.files)
         unknown = [] if raw else [k for k in found if k not in SIGNALS]
-        if unknown or (not raw and ("t" not in found or "x" not in found)):
+        if unknown or (not raw and ("t" not in found or not {"x", "v", "a"} & set(found))):
             what = f"unknown array(s) {unknown}" if unknown else "missing 't' or 'x'"
-            raise GMRInputError(f"{src}: NPZ needs arrays 't' and 'x' (optional v, a, base_acc, force, masses); "
+            raise GMRInputError(f"{src}: NPZ needs arrays 't' and 'x' (or 'v' or 'a' alone: velocity- or "
+                                f"acceleration-only sensors; optional v, a, base_acc, force, masses, equilibrium); "
                                 f"{what}; found {found}")
         arrays = {}
         for k in found:  # np.load is lazy: every read happens here, inside the check

@@ -54,6 +54,11 @@ def prepare(recordings, n_dof: int, topology: str, src: str = "recording") -> li
     for k, rec in enumerate(recordings):
         name = f"{src} {k} ({rec.name})"
         rec = validate(rec, name)
+        if not rec.equilibrium_observed:
+            raise GMRInputError(
+                f"{name}: x was integrated from {rec.integration['from']}, so the equilibrium it vibrated about "
+                f"is unobservable, and simulated trajectories cannot be compared with it; give the recording's "
+                f"'equilibrium' (the static displacement), or record x")
         if rec.n_dof != n_dof:
             raise GMRInputError(
                 f"{name}: 'x' has {rec.n_dof} DOF column(s) but the model has {n_dof} DOFs; "

@@ -1,0 +1,134 @@
+"""Displacement from velocity- or acceleration-only sensors (a laser vibrometer, accelerometers).
+
+A recording may carry `v` or `a` without `x` (contracts). The missing displacement (and, from an
+acceleration, the velocity) is integrated, per column:
+
+1. integrate by the cumulative trapezoid rule (for `a`, the acceleration relative to the
+   base, a - base_acc);
+2. remove the least-squares polynomial of the integration's degree (a line for v -> x, a
+   parabola for a -> x: the unknown initial values, and what a sensor's bias integrates to);
+3. remove the drift: zero the content below `f_hp` (cosine transform of the record, i.e. the
+   Fourier series of its mirror extension: no edge transient, no phase shift), with
+   `f_hp` = `HP_FRACTION` x the measured signal's low edge: going down from the peak of its
+   Welch spectrum, the last frequency at which it stands 10 dB per integration (v: 10 dB,
+   a: 20 dB; the error of each integration grows as 1/f) above its noise floor (the median level of the top fifth
+   of the band, as `_derivatives.noise_cutoff`); never below 3 / record length. Below that
+   frequency the integral would be the integrated noise (a random walk), not the motion.
+
+Content below `f_hp` (a static offset, a slow creep) is not recoverable from v or a and is
+removed; the cut-off is reported (`Recording.integration`). The result has zero mean: the static
+position the record vibrates about (its equilibrium) is unobservable. It is placed at
+`equilibrium` when given; otherwise the recording says so (`integration["equilibrium"]`), a fit
+refuses it, and `discover` estimates it from the model (see `_discover`).
+
+An acceleration-only recording integrates a - base_acc, the displacement of each mass relative
+to the base; `Recording.complete(topology)` turns those into the cell deformations of a chain.
+"""
+
+import numpy as np
+
+from .._errors import GMRInputError
+from ._derivatives import FLOOR_RATIO
+
+#: the drift cut-off as a fraction of the measured signal's low edge
+HP_FRACTION = 0.8
+
+
+def low_edge(s: np.ndarray, dt: float, ratio: float = FLOOR_RATIO) -> float:
+    """Low edge (Hz) of the band that holds s: from the peak of its Welch spectrum (segments of
+    up to 4096 samples, each with its straight line removed; running median over 5 bins) down
+    to the last frequency where it still stands `ratio` x above its noise floor (a slow
+    disturbance below a gap is not followed)."""
+    from scipy.ndimage import median_filter
+    from scipy.signal import welch
+
+    s = np.asarray(s, float)
+    f, p = welch(s, fs=1.0 / dt, nperseg=int(min(s.size, 4096)), detrend="linear")
+    p = median_filter(p, size=5, mode="nearest")
+    floor = float(np.median(p[f >= 0.8 * f[-1]]))
+    k = int(np.argmax(np.where(np.arange(f.size) >= 2, p, 0.0)))
+    while k > 2 and p[k - 1] >= ratio * floor:
+        k -= 1
+    return float(f[k])
+
+
+def highpass_cutoff(s: np.ndarray, dt: float, times: int = 1) -> float:
+    """The drift-removal cut-off (Hz) for integrating the measured signal s `times` times
+    (module docstring): the margin over the noise floor is 10 dB per integration."""
+    n = np.shape(s)[0]
+    return float(min(max(HP_FRACTION * low_edge(s, dt, FLOOR_RATIO**times), 3.0 / (n * dt)), 0.2 / dt))
+
+
+def remove_drift(y: np.ndarray, dt: float, f_hp: float) -> np.ndarray:
+    """y (N,) without its content below `f_hp`: the cosine-transform (DCT-II) coefficients of
+    frequency k / (2 N dt) < f_hp are zeroed. The DCT is the Fourier series of the record
+    extended by its mirror image, which is continuous at both ends: no edge transient (a
+    recursive high-pass this far below the sampling rate rings for most of a record), no phase."""
+    from scipy.fft import dct, idct
+
+    c = dct(np.asarray(y, float), type=2, norm="ortho")
+    k = np.arange(c.size) / (2.0 * c.size * dt)
+    c[k < f_hp] = 0.0
+    return idct(c, type=2, norm="ortho")
+
+
+def _cumtrapz(s: np.ndarray, dt: float) -> np.ndarray:
+    return np.concatenate([[0.0], np.cumsum(0.5 * (s[1:] + s[:-1]) * dt)])
+
+
+def detrend(y: np.ndarray, degree: int) -> np.ndarray:
+    """y without its least-squares polynomial of `degree` (Legendre basis on the record)."""
+    u = np.linspace(-1.0, 1.0, y.size)
+    V = np.polynomial.legendre.legvander(u, degree)
+    return y - V @ np.linalg.lstsq(V, y, rcond=None)[0]
+
+
+def integrate_once(s: np.ndarray, dt: float, f_hp: float, times: int = 1) -> np.ndarray:
+    """The drift-free `times`-fold integral of s (N,) or (N, D), column by column (module
+    docstring): integrate `times` times, remove the least-squares polynomial of degree `times`
+    (the unknown initial values and what a sensor's bias integrates to), then the content
+    below `f_hp`."""
+    s = np.asarray(s, float)
+    if s.ndim == 2:
+        return np.stack([integrate_once(s[:, k], dt, f_hp, times) for k in range(s.shape[1])], 1)
+    y = s
+    for _ in range(times):
+        y = _cumtrapz(y, dt)
+    return remove_drift(detrend(y, times), dt, f_hp)
+
+
+def integrated_signals(t, v, a, base_acc, src: str):
+    """(x, v or None when v was measured, info) from a recording's measured v or a (module
+    docstring); info per DOF: the source, the cut-off used and the samples."""
+    t = np.asarray(t, float)
+    n = t.shape[0]
+    source, s = ("v", v) if v is not None else ("a", a)
+    s = np.asarray(s, float)
+    if n < 16:
+        raise GMRInputError(f"{src}: only {n} samples: too few to integrate '{source}' into a displacement")
+    for key, val in ((source, s), ("base_acc", base_acc), ("t", t)):
+        if val is not None and not np.all(np.isfinite(val)):
+            bad = int(np.sum(~np.isfinite(val)))
+            raise GMRInputError(f"{src}: '{key}' has {bad} NaN/inf value(s); remove or interpolate them "
+                                f"before '{source}' can be integrated into a displacement")
+    dt = float((t[-1] - t[0]) / (n - 1))
+    if not dt > 0:
+        raise GMRInputError(f"{src}: 't' is not increasing; cannot integrate '{source}'")
+    if source == "a" and base_acc is not None:
+        s = s - np.asarray(base_acc, float).reshape(-1)[:, None]
+    cut = [highpass_cutoff(s[:, k], dt, 2 if source == "a" else 1) for k in range(s.shape[1])]
+    cols_x, cols_v = [], []
+    for k in range(s.shape[1]):
+        if source == "a":  # v and x each from a: x is not the integral of the drift-removed v
+            cols_v.append(integrate_once(s[:, k], dt, cut[k], 1))
+        cols_x.append(integrate_once(s[:, k], dt, cut[k], 2 if source == "a" else 1))
+    x = np.stack(cols_x, 1)
+    v_out = np.stack(cols_v, 1) if source == "a" else None
+    info = {"from": source, "f_highpass_hz": cut,
+            "method": ("cumulative trapezoid, least-squares polynomial and cosine-transform content below a cut-off "
+                       f"removed; cut-off {HP_FRACTION:.3g} x the low edge of the band where '{source}' stands "
+                       f"{10 * (2 if source == 'a' else 1)} dB above its noise floor"
+                       + (" (twice: a -> v -> x)" if source == "a" else "")),
+            "coordinates": ("displacement of each mass relative to the base" if source == "a"
+                            else "as v (cell deformations for a chain)")}
+    return x, v_out, info
