@@ -11,6 +11,11 @@ def _g(x):
     return f"{x:.4g}"
 
 
+def _range(vals) -> str:
+    lo, hi = f"{min(vals):.3g}", f"{max(vals):.3g}"
+    return lo if lo == hi else f"{lo}-{hi}"
+
+
 def summary(report) -> str:
     """Plain-words summary: one sentence per finding, with evidence and uncertainty."""
     b, a = report.before, report.after
@@ -39,6 +44,14 @@ def summary(report) -> str:
             lines.append(f"  re-calibration, {_cell(report, c['dof'])}: {what} {_g(mv)} -> "
                          f"{_g(mv + c['coefficient'])} (correction {_g(c['coefficient'])}, 95 % CI "
                          f"{_g(lo)} to {_g(hi)})")
+    integ = report.settings.get("integrated") or {}
+    for src in sorted({i["from"] for i in integ.values()}):
+        names = [n for n, i in integ.items() if i["from"] == src]
+        cuts = [c for n in names for c in integ[n]["f_highpass_hz"]]
+        lines.append(f"  x integrated from {'velocity' if src == 'v' else 'acceleration'} ({', '.join(names)}): "
+                     f"content below {_range(cuts)} Hz removed as drift; the equilibrium offset "
+                     + ("was given" if all(integ[n]["equilibrium"] == "given" for n in names) else
+                        "is unobservable and was placed by each model's force balance"))
     if b["kind"] == "equation" and b.get("why_not_output"):
         lines.append(f"  error measure: equation (force) error, not simulation (output) error: {b['why_not_output']}")
     for w in report.warnings:

@@ -65,7 +65,9 @@ def discovery_figures(report, out_dir) -> list[str]:
         for i in range(d):
             ax = axes[i, 0]
             if report.before["kind"] == "output":
-                ax.plot(r0.t, r0.x[:, i], "k", lw=0.8, label="measured")
+                src = (r0.integration or {}).get("from")
+                ax.plot(r0.t, r0.x[:, i] - (r0.x[:, i].mean() if src else 0.0), "k", lw=0.8,
+                        label=f"integrated from {src} (drift removed)" if src else "measured")
                 ax.plot(r0.t[r0.t.size - sims_b[0].shape[0]:], sims_b[0][:, i], lw=0.7, label=f"given model ({100 * report.before['nrmse']:.3g} %)")
                 ax.plot(r0.t[r0.t.size - sims_a[0].shape[0]:], sims_a[0][:, i], lw=0.7, label=f"augmented ({100 * report.after['nrmse']:.3g} %)")
                 ax.set_ylabel("x")
