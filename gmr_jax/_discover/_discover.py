@@ -40,7 +40,7 @@ from ._equation import dof_rows
 from ._identify import (MASS_RANGE, VIF_MAX, DofIdentifiability, ambiguous, closest, collinear_entry, determined,
                         explained, homogeneous, mass_believable, screen, separability_entry, vif)
 from ._locate import locate, where_sentence
-from ._offset import comparable, place, preload_entry, unobserved
+from ._offset import comparable, place, preload_entry
 from ._select import SelectionRule, select_terms
 
 SIM = Integrator(rtol=1e-7, atol=1e-10, max_steps=400_000)
@@ -293,8 +293,8 @@ def discover(
                             "enter several cells' equations)")
     recs = [r.complete(model.topology) for r in recs]
     hold_c = [r.complete(model.topology) for r in hold] if hold else recs
-    unseen = [r.name for r in recs if unobserved(r)]
     recs, placed = place(model, recs)
+    unseen = [p["recording"] for p in placed]
     catalogue = default_catalogue(d) if catalogue is None else list(catalogue)
     settings = {"form": form, "support": support, "decimate": int(decimate),
                 "refit_masses": bool(refit_masses), "derivatives":
@@ -304,7 +304,7 @@ def discover(
                     "; weak form: no acceleration used" if form == "weak" else ""),
                 "derivative_windows": windows, "form_reason": _form_reason(form_asked, form, estimated, clear,
                                                                             decimate),
-                "integrated": {r.name: {k: v for k, v in r.integration.items() if k != "offset"}
+                "integrated": {r.name: {k: v for k, v in r.integration.items() if k not in ("offset", "topology")}
                                for r in recs + hold_c if r.integration},
                 "equilibria_placed": placed,
                 "rule": rule.__dict__, "holdout": [r.name for r in hold] or "estimation recordings "

@@ -26,15 +26,9 @@ from .._reconstruct._reconstruct import regression_targets
 from .._recordings._integrate import detrend, remove_drift
 
 
-def unobserved(rec) -> bool:
-    """x integrated from v or a, and no equilibrium given."""
-    return not rec.equilibrium_observed
-
-
-def _balance(model, rec, dof: int, x: np.ndarray) -> np.ndarray:
-    """Coefficients (in c, increasing order) of mean_t F_dof(x + c, v) - mean_t y_dof."""
-    v = rec.v[:, dof]
-    y = regression_targets(rec, np.asarray(model.masses), model.topology)[:, dof]
+def _balance(model, dof: int, x: np.ndarray, v: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Coefficients (in c, increasing order) of mean_t F_dof(x + c, v) - mean_t y, for the
+    DOF's x, v and carried force y."""
     g = np.zeros(1)
     g[0] = -float(np.mean(y))
     for t in model.terms():
@@ -50,10 +44,10 @@ def _balance(model, rec, dof: int, x: np.ndarray) -> np.ndarray:
     return P.polytrim(g, 0.0) if np.any(g) else np.zeros(1)
 
 
-def offset(model, rec, dof: int) -> tuple[float, str]:
-    """The offset c placing DOF `dof` of an unobserved recording (module docstring), and how."""
-    x = rec.x[:, dof] - (rec.integration or {}).get("offset", np.zeros(rec.n_dof))[dof]
-    g = _balance(model, rec, dof, x)
+def offset(model, rec, dof: int, x: np.ndarray, y: np.ndarray) -> tuple[float, str]:
+    """The offset c placing DOF `dof` of an unobserved recording (module docstring), and how;
+    `x` the DOF's zero-mean integrated displacement, `y` the force it carries."""
+    g = _balance(model, dof, x, rec.v[:, dof], y)
     if g.size < 2:
         return 0.0, "no position-dependent force on this DOF: the offset does not enter the model"
     dg = P.polyder(g)
@@ -80,14 +74,15 @@ def place(model, recs: list) -> tuple[list, list]:
     `integration["offset"]`), and one entry per recording for the report."""
     out, notes = [], []
     for r in recs:
-        if not unobserved(r):
+        if r.equilibrium_observed:
             out.append(r)
             continue
-        old = (r.integration or {}).get("offset", np.zeros(r.n_dof))
-        cs, how = zip(*(offset(model, r, i) for i in range(r.n_dof)))
+        x0 = r.x - r.integration.get("offset", np.zeros(r.n_dof))[None, :]  # as integrated
+        y = regression_targets(r, np.asarray(model.masses), model.topology)
+        cs, how = zip(*(offset(model, r, i, x0[:, i], y[:, i]) for i in range(r.n_dof)))
         cs = np.asarray(cs, float)
         info = {**r.integration, "offset": cs, "equilibrium": f"estimated from the model: {how[0]}"}
-        out.append(replace(r, x=r.x - old[None, :] + cs[None, :], integration=info))
+        out.append(replace(r, x=x0 + cs[None, :], integration=info))
         notes.append({"recording": r.name, "offset": cs.tolist(), "how": list(how)})
     return out, notes
 

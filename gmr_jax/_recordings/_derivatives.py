@@ -48,23 +48,29 @@ def band_edge(x: np.ndarray, dt: float, fraction: float = 0.995) -> float:
 FLOOR_RATIO = 10.0
 
 
+def floor_spectrum(x: np.ndarray, dt: float, nperseg: int, smooth: int, detrend: str = "constant"):
+    """(f, p, floor): the Welch spectrum of x (segments of up to `nperseg` samples, each
+    detrended by `detrend`), smoothed by a running median over `smooth` bins (against isolated
+    lines), and its noise floor, the median level of the top fifth of the band."""
+    from scipy.ndimage import median_filter
+    from scipy.signal import welch
+
+    f, p = welch(x, fs=1.0 / dt, nperseg=int(min(x.size, nperseg)), detrend=detrend)
+    p = median_filter(p, size=smooth, mode="nearest")
+    return f, p, float(np.median(p[f >= 0.8 * f[-1]]))
+
+
 def noise_cutoff(x: np.ndarray, dt: float, f_band: float | None = None) -> float:
     """Frequency (Hz) at which the Welch spectrum of x (mean removed; segments of up to 2048
     samples, running median over 9 bins against isolated lines) first falls below `FLOOR_RATIO`
     times the noise floor (the median level of the top fifth of the band), searching upwards
     from the 99.5 % band edge (`f_band`, computed when not given); the Nyquist frequency when it
     never does."""
-    from scipy.ndimage import median_filter
-    from scipy.signal import welch
-
     x = np.asarray(x, float)
     x = x - np.mean(x)
-    nper = int(min(x.size, 2048))
-    f, p = welch(x, fs=1.0 / dt, nperseg=nper)
+    f, p, floor = floor_spectrum(x, dt, 2048, 9)
     if f.size < 10:
         return float(f[-1])
-    p = median_filter(p, size=9, mode="nearest")
-    floor = float(np.median(p[f >= 0.8 * f[-1]]))
     f_band = band_edge(x, dt) if f_band is None else f_band
     below = np.nonzero((p < FLOOR_RATIO * floor) & (f >= f_band))[0]
     return float(f[below[0]]) if below.size else float(f[-1])

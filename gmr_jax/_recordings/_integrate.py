@@ -26,9 +26,10 @@ to the base; `Recording.complete(topology)` turns those into the cell deformatio
 """
 
 import numpy as np
+from scipy.integrate import cumulative_trapezoid
 
 from .._errors import GMRInputError
-from ._derivatives import FLOOR_RATIO
+from ._derivatives import FLOOR_RATIO, floor_spectrum
 
 #: the drift cut-off as a fraction of the measured signal's low edge
 HP_FRACTION = 0.8
@@ -39,13 +40,7 @@ def low_edge(s: np.ndarray, dt: float, ratio: float = FLOOR_RATIO) -> float:
     up to 4096 samples, each with its straight line removed; running median over 5 bins) down
     to the last frequency where it still stands `ratio` x above its noise floor (a slow
     disturbance below a gap is not followed)."""
-    from scipy.ndimage import median_filter
-    from scipy.signal import welch
-
-    s = np.asarray(s, float)
-    f, p = welch(s, fs=1.0 / dt, nperseg=int(min(s.size, 4096)), detrend="linear")
-    p = median_filter(p, size=5, mode="nearest")
-    floor = float(np.median(p[f >= 0.8 * f[-1]]))
+    f, p, floor = floor_spectrum(np.asarray(s, float), dt, 4096, 5, detrend="linear")
     k = int(np.argmax(np.where(np.arange(f.size) >= 2, p, 0.0)))
     while k > 2 and p[k - 1] >= ratio * floor:
         k -= 1
@@ -72,10 +67,6 @@ def remove_drift(y: np.ndarray, dt: float, f_hp: float) -> np.ndarray:
     return idct(c, type=2, norm="ortho")
 
 
-def _cumtrapz(s: np.ndarray, dt: float) -> np.ndarray:
-    return np.concatenate([[0.0], np.cumsum(0.5 * (s[1:] + s[:-1]) * dt)])
-
-
 def detrend(y: np.ndarray, degree: int) -> np.ndarray:
     """y without its least-squares polynomial of `degree` (Legendre basis on the record)."""
     u = np.linspace(-1.0, 1.0, y.size)
@@ -83,17 +74,13 @@ def detrend(y: np.ndarray, degree: int) -> np.ndarray:
     return y - V @ np.linalg.lstsq(V, y, rcond=None)[0]
 
 
-def integrate_once(s: np.ndarray, dt: float, f_hp: float, times: int = 1) -> np.ndarray:
-    """The drift-free `times`-fold integral of s (N,) or (N, D), column by column (module
-    docstring): integrate `times` times, remove the least-squares polynomial of degree `times`
-    (the unknown initial values and what a sensor's bias integrates to), then the content
-    below `f_hp`."""
-    s = np.asarray(s, float)
-    if s.ndim == 2:
-        return np.stack([integrate_once(s[:, k], dt, f_hp, times) for k in range(s.shape[1])], 1)
-    y = s
+def integrate(s: np.ndarray, dt: float, f_hp: float, times: int = 1) -> np.ndarray:
+    """The drift-free `times`-fold integral of s (N,) (module docstring): integrate `times`
+    times (trapezoid), remove the least-squares polynomial of degree `times` (the unknown initial
+    values and what a sensor's bias integrates to), then the content below `f_hp`."""
+    y = np.asarray(s, float)
     for _ in range(times):
-        y = _cumtrapz(y, dt)
+        y = cumulative_trapezoid(y, dx=dt, initial=0.0)
     return remove_drift(detrend(y, times), dt, f_hp)
 
 
@@ -114,21 +101,19 @@ def integrated_signals(t, v, a, base_acc, src: str):
     dt = float((t[-1] - t[0]) / (n - 1))
     if not dt > 0:
         raise GMRInputError(f"{src}: 't' is not increasing; cannot integrate '{source}'")
+    times = 2 if source == "a" else 1
     if source == "a" and base_acc is not None:
         s = s - np.asarray(base_acc, float).reshape(-1)[:, None]
-    cut = [highpass_cutoff(s[:, k], dt, 2 if source == "a" else 1) for k in range(s.shape[1])]
-    cols_x, cols_v = [], []
-    for k in range(s.shape[1]):
-        if source == "a":  # v and x each from a: x is not the integral of the drift-removed v
-            cols_v.append(integrate_once(s[:, k], dt, cut[k], 1))
-        cols_x.append(integrate_once(s[:, k], dt, cut[k], 2 if source == "a" else 1))
-    x = np.stack(cols_x, 1)
-    v_out = np.stack(cols_v, 1) if source == "a" else None
+    cut = [highpass_cutoff(s[:, k], dt, times) for k in range(s.shape[1])]
+    x = np.stack([integrate(s[:, k], dt, cut[k], times) for k in range(s.shape[1])], 1)
+    # from a, v and x are each integrated from a: x is not the integral of the drift-removed v
+    v_out = np.stack([integrate(s[:, k], dt, cut[k], 1) for k in range(s.shape[1])], 1) if times == 2 else None
     info = {"from": source, "f_highpass_hz": cut,
             "method": ("cumulative trapezoid, least-squares polynomial and cosine-transform content below a cut-off "
                        f"removed; cut-off {HP_FRACTION:.3g} x the low edge of the band where '{source}' stands "
-                       f"{10 * (2 if source == 'a' else 1)} dB above its noise floor"
-                       + (" (twice: a -> v -> x)" if source == "a" else "")),
+                       f"{10 * times} dB above its noise floor" + (" (twice: a -> v -> x)" if times == 2 else "")),
             "coordinates": ("displacement of each mass relative to the base" if source == "a"
-                            else "as v (cell deformations for a chain)")}
+                            else "as v (cell deformations for a chain)"),
+            # from a: the mass displacements until `Recording.complete` has applied a topology
+            "topology": None}
     return x, v_out, info

@@ -139,13 +139,13 @@ class Recording:
         x, v, a, derived = self.x, self.v, self.a, list(self.derived)
         info = self.integration
         topo = as_topology(topology)
-        if info and info.get("from") == "a" and info.get("coordinates", "").startswith("displacement of each"):
+        if info and info["from"] == "a" and info["topology"] is None:  # not yet given a topology
             if topo.name == "chain" and x.shape[1] > 1:  # mass displacements -> cell deformations
                 x = np.diff(x, axis=1, prepend=0.0)
                 v = np.diff(v, axis=1, prepend=0.0)
-            info = {**info, "coordinates": "cell deformations" if topo.name == "chain" else
-                    "displacement of each mass relative to the base"}
-            info["coordinates"] += f" ({topo.name})"
+            info = {**info, "topology": topo.name, "coordinates": (
+                "cell deformations" if topo.name == "chain" else
+                "displacement of each mass relative to the base") + f" ({topo.name})"}
         if v is None:
             v = differentiate(x, self.dt, 1, window)
             derived.append("v")
