@@ -38,6 +38,11 @@ from ._fit._threshold import select_threshold as select_threshold
 from ._coordination._coordinate import GlobalCoefficients as GlobalCoefficients, coordinate as coordinate
 from ._coordination._gls import hermite_gls as hermite_gls
 from ._coordination._hermite import hermite_interpolate as hermite_interpolate
+from ._coordination._joint import (
+    JointSettings as JointSettings,
+    inadmissible as inadmissible,
+    joint_coordinate as joint_coordinate,
+)
 
 # the global model (Eq. 1)
 from ._model._io import load_model as load_model, save_model as save_model

@@ -43,9 +43,23 @@ def nes():
 
 @pytest.fixture(scope="module")
 def nes_swinging():
-    """The tri-stable NES driven at 4 mm: the outer records leave their wells."""
+    """The tri-stable NES driven at 4 mm: the outer records leave their wells. The paper's
+    coordination (the checks of the model are about its failures; the default rejects it)."""
     s = g.systems.tristable_nes()
-    return _fit(g.systems.make_recordings(s, 4e-3, seed=0, duration=DURATION))
+    return _fit(g.systems.make_recordings(s, 4e-3, seed=0, duration=DURATION), coordination="gls")
+
+
+def test_default_rejects_a_paper_route_that_explains_its_data_poorly():
+    """On the NES driven across its wells the paper's interpolant has training R² < 0; the
+    default coordination says so and takes the joint regression, whose model is admissible
+    (issue 15); the data warnings (records leaving their wells) still fire."""
+    s = g.systems.tristable_nes()
+    sol, msgs = _fit(g.systems.make_recordings(s, 4e-3, seed=0, duration=DURATION))
+    st = sol.stats["dofs"][0].stats
+    assert st["coordination"] == "joint" and st["joint_admissible"]
+    assert any("explains the data of the well" in r for r in st["paper_route_rejected"])
+    assert _has(msgs, "does not stay in one well")
+    assert not _has(msgs, "explains its own training data poorly")
 
 
 @pytest.fixture(scope="module")
@@ -174,11 +188,21 @@ def test_10_default_orders_on_sinusoidal_records(joint):
         x = np.asarray(g.simulate(joint.truth, inp, ts, xe).value[0])
         recs.append(g.Recording(t=np.asarray(ts), x=g.add_noise(x, 60.0, rng), base_acc=base, masses=np.ones(1),
                                 name=f"sine_S{i + 1}"))
-    sol, msgs = _fit(recs)
+    sol, msgs = _fit(recs, coordination="gls")
     assert sol.stats["dofs"][0].stats["K_r"] == 11
     assert _has(msgs, "sine_S2 (DOF 0): the model explains its own training data poorly (R² -")
     assert _has(msgs, "DOF 0: between the recorded equilibria the restoring force reaches", "blew up")
     assert not _has(msgs, "clipped")  # a noise-free sine input repeats its top sample, no flat tops
+    # the default rejects that interpolant and fits all wells' data jointly (issue 15)
+    sol, msgs = _fit(recs)
+    st = sol.stats["dofs"][0].stats
+    assert st["coordination"] == "joint" and st["joint_admissible"] and st["paper_route_rejected"]
+    assert not _has(msgs, "explains its own training data poorly") and not _has(msgs, "blew up")
+    x = np.linspace(-1.5, 1.5, 301) * joint.equilibria.max()
+    truth = np.polynomial.polynomial.polyval(x, [0.0, *g.systems.JOINT_STIFFNESS[:1], 0.0, g.systems.JOINT_STIFFNESS[1]])
+    model = np.polynomial.polynomial.polyval(x, np.asarray(sol.value.stiffness[0]))
+    print("restoring error of the default on 10 Hz sine records:", np.linalg.norm(model - truth) / np.linalg.norm(truth))
+    assert np.linalg.norm(model - truth) / np.linalg.norm(truth) < 0.2  # measured 15 %
 
 
 def test_cli_prints_warnings_records_them_and_strict_exits_3(nes, tmp_path, capsys):

@@ -8,7 +8,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._coordination._coordinate import coordinate, split_flat
+from .._coordination._coordinate import GlobalCoefficients, coordinate, split_flat
+from .._coordination._joint import JointSettings, inadmissible, joint_coordinate
 from .._errors import GMRInputError
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, Library
 from .._fit._local_fit import AutoThreshold, LocalFit, fit_local
@@ -171,12 +172,18 @@ def _solution(model, failure: _Failure, method, library, reports, training, warn
     return Solution(value=model, result=failure.code, stats=stats)
 
 
+def stack_padded(rows) -> np.ndarray:
+    """Stack per-DOF coefficient vectors of different lengths, zero-padded to the longest."""
+    n = max(np.asarray(r).shape[0] for r in rows)
+    return np.stack([np.pad(np.asarray(r, float), (0, n - np.asarray(r).shape[0])) for r in rows])
+
+
 def _model_from_blocks(masses, topology, stiff, vdamp, pdamp, stderr=None) -> GlobalModel:
     return GlobalModel(
         masses=jnp.asarray(masses),
-        stiffness=jnp.asarray(np.stack(stiff)),
-        velocity_damping=jnp.asarray(np.stack(vdamp)),
-        position_damping=jnp.asarray(np.stack(pdamp)),
+        stiffness=jnp.asarray(stack_padded(stiff)),
+        velocity_damping=jnp.asarray(stack_padded(vdamp)),
+        position_damping=jnp.asarray(stack_padded(pdamp)),
         topology=topology,
         stderr=stderr,
     )
@@ -245,6 +252,68 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
     return fits, sorted(dropped)
 
 
+def _speed(fits: LocalFit, vs, w, mass: float, library: Library) -> float:
+    """A generous bound on the speeds a model of this DOF will see: 3 x the recorded ones, or
+    the interwell distance times the stiffest well's angular frequency."""
+    eq = np.asarray(fits.equilibrium)
+    k1 = library.terms().index((STIFFNESS, 1)) if library.restoring_order >= 1 else None
+    k_max = float(np.max(np.abs(np.asarray(fits.coef)[:, k1]))) if k1 is not None else 0.0
+    v_max = float(np.max(np.abs(np.asarray(vs)) * (np.asarray(w) > 0)))
+    return max(3.0 * v_max, float(np.ptp(eq)) * np.sqrt(k_max / mass))
+
+
+def _paper_route_fails(coord: Solution, fits: LocalFit, xs, vs, ys, w, mass, library) -> list[str]:
+    """Why the paper's coordination of one DOF is not to be used, or []: it failed, it is not
+    admissible (`inadmissible`), or it explains a well's own data poorly (R^2 < `MIN_R2`)."""
+    if coord.result != RESULTS.successful:
+        return [RESULTS[coord.result]]
+    g = coord.value
+    why = inadmissible(g.stiffness, g.velocity_damping, g.position_damping, np.asarray(fits.equilibrium),
+                       _speed(fits, vs, w, mass, library))
+    model = GlobalModel(masses=jnp.ones(1), stiffness=g.stiffness[None], velocity_damping=g.velocity_damping[None],
+                        position_damping=g.position_damping[None])
+    xs, vs, ys, w = (np.asarray(a) for a in (xs, vs, ys, w))
+    yhat = np.asarray(jax.vmap(model.force)(jnp.asarray(xs.reshape(-1, 1)), jnp.asarray(vs.reshape(-1, 1))))
+    yhat = yhat.reshape(xs.shape)
+    for k in range(xs.shape[0]):
+        m = w[k] > 0
+        total = np.sum((ys[k, m] - ys[k, m].mean()) ** 2)
+        r2 = 1.0 - np.sum((ys[k, m] - yhat[k, m]) ** 2) / total if total > 0 else 1.0
+        if not r2 >= _sanity.MIN_R2:
+            why.append(f"it explains the data of the well at x = {float(fits.equilibrium[k]):.4g} poorly (R² {r2:.3g})")
+    return why
+
+
+def _joint(fits: LocalFit, xs, vs, ys, w, mass: float, library: Library, restoring: Solution | None = None
+           ) -> Solution:
+    """The joint coordination (`joint_coordinate`) as a `Solution` like `coordinate`'s; given
+    the paper route's `restoring` (a `coordinate` Solution), only the damping is refitted,
+    to the force left after its restoring force."""
+    eq = np.asarray(fits.equilibrium)
+    var = np.asarray(fits.rss) / np.maximum(np.asarray(fits.n_samples), 1.0)
+    var = np.where(var > 0, var, np.max(var) if np.any(var > 0) else 1.0)
+    speed = _speed(fits, vs, w, mass, library)
+    if restoring is None:
+        stiff, vdamp, pdamp, cov, stats = joint_coordinate(xs, vs, ys, w, eq, var, speed)
+    else:
+        stiff = np.asarray(restoring.value.stiffness)
+        ys = np.asarray(ys) - np.polynomial.polynomial.polyval(np.asarray(xs), stiff)
+        settings = JointSettings(log_lambdas=(0.0,), damping_only=True)
+        _, vdamp, pdamp, cov_j, stats = joint_coordinate(xs, vs, ys, w, eq, var, speed, settings)
+        nk, nj = stiff.shape[0], cov_j.shape[0] - (settings.max_degree + 1)
+        cov = np.zeros((nk + nj, nk + nj))
+        cov[:nk, :nk] = np.asarray(restoring.aux)[:nk, :nk]
+        cov[nk:, nk:] = cov_j[settings.max_degree + 1 :, settings.max_degree + 1 :]
+        stats = restoring.stats | stats
+    g = GlobalCoefficients(jnp.asarray(stiff), jnp.asarray(vdamp), jnp.asarray(pdamp))
+    if restoring is None:
+        stats |= {"K_r": stats["joint_degree"], "cond_r": 0.0}
+    stats |= {"K_d": stats["joint_damping_degree"], "cond_d": 0.0}
+    finite = bool(np.all(np.isfinite(np.asarray(g.flat()))))
+    return Solution(value=g, result=RESULTS.successful if finite else RESULTS.nonfinite, stats=stats,
+                    aux=jnp.asarray(cov))
+
+
 def reconstruct(
     recordings: list[Recording],
     library: Library = Library(5, 5),
@@ -255,7 +324,7 @@ def reconstruct(
     masses=None,
     well_tol: float = 0.1,
     screen_sigma: float | None = 3.0,
-    coordination: str = "gls",
+    coordination: str = "auto",
     keep_low_orders: bool = True,
     keep_restoring_order: int | None = None,
     shared_damping: bool = True,
@@ -343,7 +412,17 @@ def reconstruct(
         if shared_damping:
             fits, dropped = _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_sigma, i,
                                                     failure)
-        coord = coordinate(fits, library, method=coordination, throw=False)
+        why, route = [], "gls" if coordination == "auto" else coordination
+        if coordination == "joint":
+            coord = _joint(fits, xs, vs, ys, w, masses[i], library)
+        else:
+            coord = coordinate(fits, library, method="gls" if coordination == "auto" else coordination, throw=False)
+            if coordination == "auto":
+                why = _paper_route_fails(coord, fits, xs, vs, ys, w, masses[i], library)
+                if why and all("damping" in r for r in why):
+                    coord, route = _joint(fits, xs, vs, ys, w, masses[i], library, restoring=coord), "gls + joint damping"
+                elif why:
+                    coord, route = _joint(fits, xs, vs, ys, w, masses[i], library), "joint"
         if coord.result != RESULTS.successful:
             failure.note(coord.result, f"DOF {i}: coordination of the equilibria "
                          f"{np.asarray(fits.equilibrium).round(6).tolist()}, condition numbers "
@@ -378,10 +457,10 @@ def reconstruct(
             thresholds=np.asarray(fits.threshold),
             recordings_per_well=[[recs[k].name for k in g] for g in groups],
             stats={k: np.asarray(v).tolist() for k, v in coord.stats.items()}
-            | {"dropped_velocity_damping": dropped},
+            | {"dropped_velocity_damping": dropped, "coordination": route, "paper_route_rejected": why},
         ))
-    stderr = {STIFFNESS: jnp.asarray(np.stack(se_s)), VELOCITY_DAMPING: jnp.asarray(np.stack(se_v)),
-              POSITION_DAMPING: jnp.asarray(np.stack(se_p))}
+    stderr = {STIFFNESS: jnp.asarray(stack_padded(se_s)), VELOCITY_DAMPING: jnp.asarray(stack_padded(se_v)),
+              POSITION_DAMPING: jnp.asarray(stack_padded(se_p))}
     model = _model_from_blocks(masses, topology, stiff, vdamp, pdamp, stderr)
     training = training_scores(model, recs, masses, topology)
     warnings += _sanity.check_fit_quality(training)

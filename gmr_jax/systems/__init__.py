@@ -1,4 +1,5 @@
-"""Built-in systems that make data: the paper's single-DOF cases and Kresling truss chains.
+"""Built-in systems that make data: the paper's single-DOF cases, Kresling truss chains and
+non-polynomial single-DOF bistables (a shallow arch, a magnetic oscillator).
 
 Each factory returns a `System` (truth model, stable equilibria, how it is excited, the
 phase-plane box where errors are measured); `make_recordings` simulates base-sweep recordings
@@ -16,6 +17,12 @@ from ._kresling import (
     kresling3 as kresling3,
     kresling5 as kresling5,
     kresling_chain as kresling_chain,
+)
+from ._nonpolynomial import (
+    MagneticOscillator as MagneticOscillator,
+    ShallowArch as ShallowArch,
+    magnetic_bistable as magnetic_bistable,
+    shallow_arch as shallow_arch,
 )
 from ._paper_cases import (
     JOINT_STIFFNESS as JOINT_STIFFNESS,

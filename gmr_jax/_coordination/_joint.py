@@ -1,0 +1,324 @@
+"""Joint coordination: one penalised regression on every well's raw data with shared global
+coefficients, the model chosen among admissible candidates (issue 15; beyond the paper).
+
+The paper's route (Eqs. 12-21) first fits each well alone, then solves for the global
+polynomial that reproduces the local Taylor coefficients. Where a local fit keeps a term its
+data do not resolve (a near-sinusoidal record has few harmonics, so q^3, q^5 and v^3 are nearly
+collinear with q and v), the exact interpolant takes it as exact and the global law goes wild.
+Here the global law is fitted to all wells' samples at once:
+
+    y = F(x) + C(x) v + sum_{j in S} B_j sgn(v)|v|^j,
+
+F and C in Chebyshev polynomials of u = (x - c) / (2h) (c, h: centre and half-span of the
+equilibria, so the equilibria sit at u = -1/2 .. 1/2 and u in [-1, 1] is the span the model is
+used on: the equilibria widened by half their span on each side), with the penalties
+lambda_r int (d^m F / du^m)^2 du and lambda_d int (C'')^2 du over u in [-1, 1]. Between the
+wells, where no sample lies, the penalty (a smoothness prior, m = 3 by default: the least
+F''' compatible with what the wells measured) decides the shape; inside each well the data do.
+
+Every candidate (odd degree K, degree J of C, the set S of velocity terms, lambda_r, lambda_d)
+is solved from one Gram matrix (fixed shapes, vmapped) and scored by BIC with the effective
+degrees of freedom tr(A^-1 G). Among the *admissible* ones, the lowest score wins:
+
+- F confines: K odd and a positive leading coefficient (F -> +inf as x -> +inf, -inf as
+  x -> -inf);
+- F has exactly 2n - 1 sign changes for n recorded wells on u in [-3, 3] (its wells, the
+  saddles between them, and nothing else: no well the data did not put there);
+- the damping dissipates, D(x, v) v >= 0, over u in [-1, 1] and |v| up to `speed`, a
+  generous bound on the speeds the model will see (not only the training speeds).
+
+The posterior covariance sigma^2 A^-1 (the penalty read as a Gaussian prior) gives the
+uncertainty of the global coefficients, wide where the data are silent.
+"""
+
+import itertools
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .._fit._householder import back_substitute, householder_qr
+from ._hermite import monomial_map
+
+#: Half-width, in u, of the grid on which F's sign changes are counted (5 half-spans past the
+#: outer equilibria).
+SIGN_GRID_HALF_WIDTH = 3.0
+
+
+class JointSettings(eqx.Module):
+    """Candidate models of the joint coordination.
+
+    - `max_degree`: highest (odd) degree K of F; the lowest is 2n - 1 for n wells.
+    - `max_damping_degree`: highest degree J of the position-dependent damping C(x).
+    - `velocity_orders`: the candidate position-independent terms sgn(v)|v|^j beyond the
+      viscous one (0: Coulomb, 2: v|v|, 3: v^3); every subset is a candidate.
+    - `penalty_order`: m of the smoothness penalty on F.
+    - `log_lambdas`, `log_lambdas_damping`: log10 of the penalty weights, relative to
+      trace(G) / trace(penalty) of each block.
+    - `damping_only`: fit the damping alone (y already has the restoring force removed).
+    """
+
+    max_degree: int = eqx.field(static=True, default=13)
+    max_damping_degree: int = eqx.field(static=True, default=3)
+    velocity_orders: tuple = eqx.field(static=True, default=(0, 2, 3))
+    penalty_order: int = eqx.field(static=True, default=3)
+    log_lambdas: tuple = eqx.field(static=True, default=(-12.0, -10.0, -8.0, -6.0, -4.0, -2.0, 0.0))
+    log_lambdas_damping: tuple = eqx.field(static=True, default=(-8.0, -4.0, 0.0))
+    damping_only: bool = eqx.field(static=True, default=False)
+
+
+def chebyshev(u, degree: int):
+    """T_0(u) .. T_degree(u), stacked on the last axis."""
+    out = [jnp.ones_like(u), u]
+    for _ in range(2, degree + 1):
+        out.append(2.0 * u * out[-1] - out[-2])
+    return jnp.stack(out[: degree + 1], axis=-1)
+
+
+def _penalty(degree: int, order: int) -> np.ndarray:
+    """int_{-1}^{1} T_k^(order)(u) T_l^(order)(u) du, by Gauss-Legendre quadrature."""
+    u, w = np.polynomial.legendre.leggauss(degree + 8)
+    vals = np.stack([np.polynomial.chebyshev.chebval(u, np.polynomial.chebyshev.chebder(np.eye(degree + 1)[k], order))
+                     if k >= order else np.zeros_like(u) for k in range(degree + 1)], axis=1)
+    return vals.T @ (w[:, None] * vals)
+
+
+def cheb_to_monomial(degree: int) -> np.ndarray:
+    """M with sum_k a_k T_k(u) = sum_m (M a)_m u^m."""
+    cols = [np.polynomial.chebyshev.cheb2poly(np.eye(degree + 1)[k]) for k in range(degree + 1)]
+    return np.stack([np.pad(a, (0, degree + 1 - a.size)) for a in cols], axis=1)
+
+
+class _Layout(eqx.Module):
+    """Column layout of the design: F's K+1 Chebyshev columns, C's J+1 (times v), then the
+    velocity terms."""
+
+    k: int = eqx.field(static=True)
+    j: int = eqx.field(static=True)
+    vel: tuple = eqx.field(static=True)
+
+    @property
+    def p(self):
+        return self.k + 1 + self.j + 1 + len(self.vel)
+
+    @property
+    def restoring(self):
+        return slice(0, self.k + 1)
+
+    @property
+    def damping(self):
+        return slice(self.k + 1, self.k + self.j + 2)
+
+    def columns(self, u, v):
+        vel = [jnp.sign(v) * jnp.abs(v) ** j for j in self.vel]
+        return jnp.concatenate([chebyshev(u, self.k), v[..., None] * chebyshev(u, self.j),
+                                jnp.stack(vel, axis=-1).reshape(v.shape + (len(self.vel),))], axis=-1)
+
+
+def _candidates(n_wells: int, layout: _Layout, settings: JointSettings):
+    """Column masks and penalty indices of every candidate (static NumPy arrays)."""
+    k_min = max(2 * n_wells - 1, 1)
+    degrees = [k for k in range(k_min, layout.k + 1) if k % 2 == 1] if not settings.damping_only else [-1]
+    subsets = [s for r in range(len(layout.vel) + 1) for s in itertools.combinations(range(len(layout.vel)), r)]
+    masks, lam_r, lam_d, meta = [], [], [], []
+    for k, j, s, a, b in itertools.product(degrees, range(layout.j + 1), subsets,
+                                           range(len(settings.log_lambdas)), range(len(settings.log_lambdas_damping))):
+        m = np.zeros(layout.p, bool)
+        m[: k + 1] = True
+        m[layout.k + 1 : layout.k + 2 + j] = True
+        for i in s:
+            m[layout.k + layout.j + 2 + i] = True
+        masks.append(m), lam_r.append(a), lam_d.append(b)
+        meta.append((k, j, tuple(layout.vel[i] for i in s)))
+    return np.array(masks), np.array(lam_r), np.array(lam_d), meta
+
+
+def _pseudo_logdet(omega: np.ndarray, size: int) -> tuple[int, float]:
+    """Rank and log pseudo-determinant of the leading `size` block of a penalty matrix whose
+    null space is spanned by its first columns (Chebyshev degrees below the derivative order)."""
+    block = omega[:size, :size]
+    if size == 0:
+        return 0, 0.0
+    ev = np.linalg.eigvalsh(0.5 * (block + block.T))
+    pos = ev > 1e-10 * max(ev.max(), 1e-300)
+    return int(pos.sum()), float(np.sum(np.log(ev[pos]))) if pos.any() else 0.0
+
+
+def _penalty_terms(meta, omega_r, omega_d, layout: _Layout):
+    """Per candidate: rank and log pseudo-determinant of each penalty block, and the number p0
+    of unpenalised columns (the penalties' null spaces and the velocity terms)."""
+    out = []
+    for k, j, vel in meta:
+        qr_, lr = _pseudo_logdet(omega_r, k + 1) if k >= 0 else (0, 0.0)
+        qd, ld = _pseudo_logdet(omega_d, j + 1)
+        out.append((qr_, lr, qd, ld, (max(k, -1) + 1 - qr_) + (j + 1 - qd) + len(vel)))
+    return np.array(out).T
+
+
+@eqx.filter_jit
+def _select(gram, rhs, yy, n, omega_r, omega_d, masks, lam_r, lam_d, log_r, log_d, checks, pen, layout: _Layout):
+    """Solve, score and check every candidate; returns the per-candidate arrays.
+
+    Score: -2 log marginal likelihood of the penalised regression read as a Gaussian prior
+    (flat on the penalties' null spaces, noise variance profiled out), plus p0 log n for the
+    p0 unpenalised columns (BIC's charge for the terms no prior constrains):
+    (n - p0) log s2 + log|G + P| - log|P|_+ + p0 log n, s2 = (y'y - b' theta) / (n - p0)."""
+    p = gram.shape[0]
+    rr, dd = layout.restoring, layout.damping
+    scale_r = jnp.trace(gram[rr, rr]) / jnp.trace(omega_r)
+    tr_d = jnp.trace(omega_d)
+    scale_d = jnp.where(tr_d > 0, jnp.trace(gram[dd, dd]) / jnp.where(tr_d > 0, tr_d, 1.0), 0.0)
+    big_r = jnp.zeros((p, p)).at[rr, rr].set(omega_r)
+    big_d = jnp.zeros((p, p)).at[dd, dd].set(omega_d)
+    ridge = 1e-12 * jnp.diag(jnp.diag(gram))
+    grid_f, grid_d = checks
+
+    q_r, ld_r, q_d, ld_d, p0 = pen
+
+    def one(mask, ir, id_, q_r, ld_r, q_d, ld_d, p0):
+        mk = mask.astype(gram.dtype)
+        both = mk[:, None] * mk[None, :]
+        g = gram * both
+        lr, ld = 10.0 ** log_r[ir] * scale_r, 10.0 ** log_d[id_] * scale_d
+        a = g + (lr * big_r + ld * big_d + ridge) * both
+        a = a + jnp.diag(1.0 - mk)
+        r, qt = householder_qr(a, jnp.eye(p, dtype=a.dtype))
+        ainv = jax.vmap(back_substitute, in_axes=(None, 1), out_axes=1)(r, qt)
+        logdet = jnp.sum(jnp.log(jnp.abs(jnp.diag(r))))
+        b = rhs * mk
+        theta = ainv @ b
+        rss = jnp.maximum(yy - 2.0 * theta @ b + theta @ g @ theta, 1e-300 * yy)
+        edf = jnp.trace(ainv @ g)
+        s2 = jnp.maximum(yy - theta @ b, 1e-300 * yy) / (n - p0)
+        logdet_p = q_r * jnp.log(lr) + ld_r + jnp.where(q_d > 0, q_d * jnp.log(jnp.maximum(ld, 1e-300)) + ld_d, 0.0)
+        bic = (n - p0) * jnp.log(s2) + logdet - logdet_p + p0 * jnp.log(n)
+        # admissibility
+        f = grid_f @ theta[rr]
+        pos = f >= 0
+        sign_changes = jnp.sum(pos[1:] != pos[:-1])
+        lead = jnp.max(jnp.where(mask[rr], jnp.arange(layout.k + 1), 0))
+        confines = (theta[rr][lead] > 0) & (lead % 2 == 1)
+        dissipation = grid_d @ theta[rr.stop:]
+        dissipative = jnp.all(dissipation >= -1e-9 * jnp.max(jnp.abs(dissipation)))
+        return theta, ainv, rss, edf, bic, sign_changes, confines, dissipative
+
+    return jax.vmap(one)(jnp.asarray(masks), jnp.asarray(lam_r), jnp.asarray(lam_d), *(jnp.asarray(a) for a in pen))
+
+
+def joint_coordinate(
+    xs: Float[Array, "wells samples"],
+    vs: Float[Array, "wells samples"],
+    ys: Float[Array, "wells samples"],
+    weights: Float[Array, "wells samples"],
+    equilibria: Float[Array, " wells"],
+    well_variance: Float[Array, " wells"],
+    speed: float,
+    settings: JointSettings = JointSettings(),
+):
+    """The joint coordination of one DOF (module docstring).
+
+    **Arguments:** per well (padded to one length, `weights` 0 on padding) the samples x, v and
+    the force the DOF carries y (left side of Eq. 8); the equilibria; each well's residual
+    variance (the local fit's, to weight wells of different noise alike); `speed`, the largest
+    |v| over which the damping must dissipate.
+
+    **Returns:** `(stiffness, velocity_damping, position_damping, covariance, stats)`:
+    monomial coefficients in x (F: K_max + 1; B_j of sgn(v)|v|^j up to the largest
+    velocity order, B_1 the viscous term C(0); C_j of x^j v, C_0 = 0), the covariance of their
+    concatenation, and `stats` (the chosen degree, damping set, penalty weights, BIC, the
+    number of admissible candidates, whether the chosen one is admissible, sigma^2).
+    """
+    xs, vs, ys, weights = (np.asarray(a, float) for a in (xs, vs, ys, weights))
+    eq = np.asarray(equilibria, float)
+    n_wells = eq.shape[0]
+    lo, hi = float(eq.min()), float(eq.max())
+    c, h = 0.5 * (lo + hi), max(0.5 * (hi - lo), 1e-300)
+    layout = _Layout(settings.max_degree, settings.max_damping_degree, tuple(settings.velocity_orders))
+    w = weights / np.asarray(well_variance, float).reshape(-1, 1)
+    u = (xs - c) / (2.0 * h)
+    cols = np.asarray(layout.columns(jnp.asarray(u), jnp.asarray(vs)))  # (wells, samples, p)
+    scale = np.sqrt(np.einsum("wn,wnp->p", w, cols**2) / w.sum())
+    scale = np.where(scale > 0, scale, 1.0)
+    cols = cols / scale
+    gram = np.einsum("wn,wnp,wnq->pq", w, cols, cols)
+    rhs = np.einsum("wn,wnp,wn->p", w, cols, ys)
+    yy = float(np.einsum("wn,wn,wn->", w, ys, ys))
+    n = float(weights.sum())
+    sr, sd = scale[layout.restoring], scale[layout.damping]
+    omega_r = _penalty(layout.k, settings.penalty_order) / np.outer(sr, sr)
+    omega_d = _penalty(layout.j, min(2, layout.j)) / np.outer(sd, sd) if layout.j >= 2 else np.zeros((layout.j + 1,) * 2)
+    masks, lam_r, lam_d, meta = _candidates(n_wells, layout, settings)
+    # admissibility grids: F on u in [-3, 3]; D v on u in [-1, 1] x |v| in (0, speed]
+    ug = np.linspace(-SIGN_GRID_HALF_WIDTH, SIGN_GRID_HALF_WIDTH, 1201)
+    grid_f = np.asarray(chebyshev(jnp.asarray(ug), layout.k)) / sr
+    uu, sp = np.meshgrid(np.linspace(-1.0, 1.0, 41), np.linspace(0.0, speed, 41)[1:], indexing="ij")
+    dcols = np.asarray(layout.columns(jnp.asarray(uu.ravel()), jnp.asarray(sp.ravel())))[:, layout.k + 1 :]
+    grid_d = dcols * sp.ravel()[:, None] / scale[layout.k + 1 :]
+    pen = _penalty_terms(meta, omega_r, omega_d, layout)
+    out = _select(jnp.asarray(gram), jnp.asarray(rhs), yy, n, jnp.asarray(omega_r), jnp.asarray(omega_d),
+                  masks, lam_r, lam_d, jnp.asarray(settings.log_lambdas), jnp.asarray(settings.log_lambdas_damping),
+                  (jnp.asarray(grid_f), jnp.asarray(grid_d)), tuple(pen), layout)
+    theta, ainv, rss, edf, bic, changes, confines, dissipative = (np.asarray(a) for a in out)
+    shape_ok = (changes == 2 * n_wells - 1) & confines if not settings.damping_only else True
+    admissible = shape_ok & dissipative & np.isfinite(bic)
+    score = np.where(admissible, bic, np.inf)
+    best = int(np.argmin(score)) if admissible.any() else int(np.nanargmin(np.where(np.isfinite(bic), bic, np.inf)))
+    k, j, vel = meta[best]
+    sigma2 = float(rss[best]) / max(n - float(edf[best]), 1.0)
+    cov_theta = sigma2 * ainv[best] * masks[best][:, None] * masks[best][None, :]
+    # map to monomial coefficients in x
+    to_x = lambda deg: np.asarray(monomial_map(c, 2.0 * h, deg + 1)) @ cheb_to_monomial(deg)  # noqa: E731
+    n_vel = max((*layout.vel, 1)) + 1
+    g_size = (layout.k + 1) + n_vel + (layout.j + 1)
+    lin = np.zeros((g_size, layout.p))
+    lin[: layout.k + 1, layout.restoring] = to_x(layout.k) / sr[None, :]
+    damp = to_x(layout.j) / sd[None, :]  # C(x) monomials
+    off_v, off_p = layout.k + 1, layout.k + 1 + n_vel
+    lin[off_v + 1, layout.damping] = damp[0]  # viscous term: C(0)
+    lin[off_p + 1 : off_p + layout.j + 1, layout.damping] = damp[1:]
+    for i, order in enumerate(layout.vel):
+        lin[off_v + order, layout.k + layout.j + 2 + i] = 1.0 / scale[layout.k + layout.j + 2 + i]
+    flat = lin @ theta[best]
+    cov = lin @ cov_theta @ lin.T
+    stats = {"joint_degree": k, "joint_damping_degree": j, "joint_velocity_orders": list(vel),
+             "joint_log_lambda": float(settings.log_lambdas[lam_r[best]]),
+             "joint_log_lambda_damping": float(settings.log_lambdas_damping[lam_d[best]]),
+             "joint_bic": float(bic[best]), "joint_edf": float(edf[best]), "joint_sigma2": sigma2,
+             "joint_admissible": bool(admissible[best]), "joint_n_admissible": int(admissible.sum()),
+             "joint_n_candidates": int(admissible.size)}
+    return (flat[: layout.k + 1], flat[off_v:off_p], flat[off_p:], cov, stats)
+
+
+def inadmissible(stiffness, velocity_damping, position_damping, equilibria, speed: float) -> list[str]:
+    """Why a global model of one DOF is not admissible over the span it is used on (the
+    equilibria widened by half their span on each side), or []: F must change sign exactly
+    2n - 1 times there (its n wells and the saddles between them: no other well, no escape),
+    and the damping must dissipate, D(x, v) v >= 0 and not identically 0, for |v| <= `speed`.
+    Monomial coefficients in x, as `GlobalModel` holds them."""
+    eq = np.asarray(equilibria, float)
+    lo, hi = float(eq.min()), float(eq.max())
+    half = 0.5 * (hi - lo)
+    x = np.linspace(lo - half, hi + half, 801)
+    f = np.polynomial.polynomial.polyval(x, np.asarray(stiffness, float))
+    out = []
+    coef = np.trim_zeros(np.asarray(stiffness, float), "b")
+    if coef.size % 2 == 1 and coef.size > 1:  # even degree: F has one sign at both ends
+        out.append(f"its restoring force has even degree {coef.size - 1}, so it cannot confine on both sides "
+                   f"(F -> {'+' if coef[-1] > 0 else '-'}inf as x -> ±inf)")
+    pos = f >= 0
+    changes = int(np.sum(pos[1:] != pos[:-1]))
+    if changes != 2 * eq.size - 1:
+        out.append(f"its restoring force changes sign {changes} times on [{lo - half:.4g}, {hi + half:.4g}] where "
+                   f"{eq.size} wells and the saddles between them need {2 * eq.size - 1}")
+    xx, vv = np.meshgrid(np.linspace(lo - half, hi + half, 41), np.linspace(0.0, speed, 41)[1:], indexing="ij")
+    b = np.asarray(velocity_damping, float)
+    dv = np.polynomial.polynomial.polyval(xx, np.asarray(position_damping, float)) * vv**2
+    dv = dv + sum(b[j] * vv ** (j + 1) for j in range(b.size))
+    if not np.any(dv > 0):
+        out.append("it has no damping")
+    elif np.min(dv) < -1e-9 * np.max(np.abs(dv)):
+        i = np.unravel_index(np.argmin(dv), dv.shape)
+        out.append(f"its damping feeds energy in (D v < 0) at x = {xx[i]:.4g}, v = {vv[i]:.4g}")
+    return out
