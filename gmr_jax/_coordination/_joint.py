@@ -293,8 +293,9 @@ def joint_coordinate(
 
 def inadmissible(stiffness, velocity_damping, position_damping, equilibria, speed: float) -> list[str]:
     """Why a global model of one DOF is not admissible over the span it is used on (the
-    equilibria widened by half their span on each side), or []: F must change sign exactly
-    2n - 1 times there (its n wells and the saddles between them: no other well, no escape),
+    equilibria widened by half their span on each side), or []: F must confine (odd degree,
+    positive leading coefficient: F -> +inf as x -> +inf, -inf as x -> -inf) and change sign
+    exactly 2n - 1 times there (its n wells and the saddles between them: no other well),
     and the damping must dissipate, D(x, v) v >= 0 and not identically 0, for |v| <= `speed`.
     Monomial coefficients in x, as `GlobalModel` holds them."""
     eq = np.asarray(equilibria, float)
@@ -307,6 +308,9 @@ def inadmissible(stiffness, velocity_damping, position_damping, equilibria, spee
     if coef.size % 2 == 1 and coef.size > 1:  # even degree: F has one sign at both ends
         out.append(f"its restoring force has even degree {coef.size - 1}, so it cannot confine on both sides "
                    f"(F -> {'+' if coef[-1] > 0 else '-'}inf as x -> ±inf)")
+    elif coef.size > 1 and coef[-1] < 0:
+        out.append(f"its restoring force turns outward far out (leading term {coef[-1]:.4g} x^{coef.size - 1}: "
+                   f"F -> -inf as x -> +inf): a motion that leaves the recorded range escapes")
     pos = f >= 0
     changes = int(np.sum(pos[1:] != pos[:-1]))
     if changes != 2 * eq.size - 1:
