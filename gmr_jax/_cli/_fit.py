@@ -21,6 +21,11 @@ def register(sub):
     f.add_argument("--out", required=True, help="model JSON to write (gmr-model/1)")
     add_columns_option(f)
     f.add_argument("--method", choices=["gmr", "gmc-sindy"], default="gmr")
+    f.add_argument("--coordination", choices=["auto", "gls", "hermite", "joint"], default="auto",
+                   help="GMR's global step: auto (default: the paper's covariance-weighted route unless it fails "
+                   "its own data or its damping feeds energy in, then the joint regression), gls, hermite (the "
+                   "paper's exact interpolant), joint (one penalised regression on all wells' data, admissible "
+                   "models only)")
     f.add_argument("--restoring-order", "-r", type=positive_int, default=5)
     f.add_argument("--damping-order", "-d", type=positive_int, default=5)
     f.add_argument("--threshold", default="auto", help="STLS threshold on normalised coefficients, or 'auto' "
@@ -66,6 +71,8 @@ def run(args) -> int:
         except ValueError:
             raise GMRInputError(f"--masses must be comma-separated numbers, got {args.masses!r}") from None
     fn = gmr.gmc_sindy if args.method == "gmc-sindy" else gmr.reconstruct
+    if args.method == "gmr":
+        kwargs["coordination"] = args.coordination
     with warnings.catch_warnings():  # printed below as `warning:` lines, once each
         warnings.simplefilter("ignore", GMRDataWarning)
         sol = fn(recs, lib, topology=args.topology, masses=masses, **kwargs)

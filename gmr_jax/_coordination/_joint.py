@@ -42,6 +42,9 @@ from jaxtyping import Array, Float
 from .._fit._householder import back_substitute, householder_qr
 from ._hermite import monomial_map
 
+#: Damping power D v below -this x its largest value on the check grid counts as feeding energy in
+#: (a damping law that is zero at a point, like the joint's 50 x^2 v, fits slightly negative there).
+DISSIPATION_TOLERANCE = 1e-3
 #: Half-width, in u, of the grid on which F's sign changes are counted (5 half-spans past the
 #: outer equilibria).
 SIGN_GRID_HALF_WIDTH = 3.0
@@ -201,7 +204,7 @@ def _select(gram, rhs, yy, n, omega_r, omega_d, masks, lam_r, lam_d, log_r, log_
         lead = jnp.max(jnp.where(mask[rr], jnp.arange(layout.k + 1), 0))
         confines = (theta[rr][lead] > 0) & (lead % 2 == 1)
         dissipation = grid_d @ theta[rr.stop:]
-        dissipative = jnp.all(dissipation >= -1e-9 * jnp.max(jnp.abs(dissipation)))
+        dissipative = jnp.all(dissipation >= -DISSIPATION_TOLERANCE * jnp.max(jnp.abs(dissipation)))
         return theta, ainv, rss, edf, bic, sign_changes, confines, dissipative
 
     return jax.vmap(one)(jnp.asarray(masks), jnp.asarray(lam_r), jnp.asarray(lam_d), *(jnp.asarray(a) for a in pen))
@@ -322,7 +325,7 @@ def inadmissible(stiffness, velocity_damping, position_damping, equilibria, spee
     dv = dv + sum(b[j] * vv ** (j + 1) for j in range(b.size))
     if not np.any(dv > 0):
         out.append("it has no damping")
-    elif np.min(dv) < -1e-9 * np.max(np.abs(dv)):
+    elif np.min(dv) < -DISSIPATION_TOLERANCE * np.max(np.abs(dv)):
         i = np.unravel_index(np.argmin(dv), dv.shape)
         out.append(f"its damping feeds energy in (D v < 0) at x = {xx[i]:.4g}, v = {vv[i]:.4g}")
     return out
