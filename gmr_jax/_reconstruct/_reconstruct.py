@@ -421,17 +421,13 @@ def reconstruct(
                 why = _paper_route_fails(coord, fits, xs, vs, ys, w, masses[i], library)
                 fails = [r for r in why if "explains the data" in r or "damping" not in r and "restoring" not in r]
                 damping = [r for r in why if "damping" in r]
-                shape = [r for r in why if "restoring" in r]
                 if fails:
                     coord, route = _joint(fits, xs, vs, ys, w, masses[i], library), "joint"
                 elif damping:
                     coord, route = _joint(fits, xs, vs, ys, w, masses[i], library, restoring=coord), "gls + joint damping"
-                if shape and not fails:
-                    warnings.append(
-                        f"DOF {i}: the global restoring force is not admissible: {'; '.join(shape)}. It is kept "
-                        f"(it explains every well's data, and the truth may be so: the NES of the paper turns outward), "
-                        f"but a motion beyond the recorded range may escape or stop in a well no one recorded: "
-                        f"coordination='joint' (gmr fit --coordination joint) gives a confining model")
+                # A shape fault alone (even degree, turning outward, extra sign changes) is recorded in
+                # stats (`paper_route_rejected`) but not warned about here: the paper's NES truth itself turns
+                # outward, and rule 9 of `_sanity` (calibrated on it) warns where the escape is near the data.
         if coord.result != RESULTS.successful:
             failure.note(coord.result, f"DOF {i}: coordination of the equilibria "
                          f"{np.asarray(fits.equilibrium).round(6).tolist()}, condition numbers "
