@@ -68,7 +68,9 @@ def single_tone():
     """Issue 15's single-tone analogue (studies/single_tone.py): the non-polynomial arch,
     one base sine per well, displacement only, 30 dB, seed 0."""
     import sys
-    sys.path.insert(0, "studies")
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "studies"))
     import single_tone as st
 
     recs = st.tone_recordings("x", 30, 0)

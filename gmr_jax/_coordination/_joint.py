@@ -39,7 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._fit._householder import back_substitute, householder_qr
+from .._fit._householder import inverse_logdet
 from ._hermite import monomial_map
 
 #: Damping power D v below -this x its largest value on the check grid counts as feeding energy in
@@ -149,7 +149,7 @@ def _pseudo_logdet(omega: np.ndarray, size: int) -> tuple[int, float]:
     return int(pos.sum()), float(np.sum(np.log(ev[pos]))) if pos.any() else 0.0
 
 
-def _penalty_terms(meta, omega_r, omega_d, layout: _Layout):
+def _penalty_terms(meta, omega_r, omega_d):
     """Per candidate: rank and log pseudo-determinant of each penalty block, and the number p0
     of unpenalised columns (the penalties' null spaces and the velocity terms)."""
     out = []
@@ -178,8 +178,6 @@ def _select(gram, rhs, yy, n, omega_r, omega_d, masks, lam_r, lam_d, log_r, log_
     ridge = 1e-12 * jnp.diag(jnp.diag(gram))
     grid_f, grid_d = checks
 
-    q_r, ld_r, q_d, ld_d, p0 = pen
-
     def one(mask, ir, id_, q_r, ld_r, q_d, ld_d, p0):
         mk = mask.astype(gram.dtype)
         both = mk[:, None] * mk[None, :]
@@ -187,9 +185,7 @@ def _select(gram, rhs, yy, n, omega_r, omega_d, masks, lam_r, lam_d, log_r, log_
         lr, ld = 10.0 ** log_r[ir] * scale_r, 10.0 ** log_d[id_] * scale_d
         a = g + (lr * big_r + ld * big_d + ridge) * both
         a = a + jnp.diag(1.0 - mk)
-        r, qt = householder_qr(a, jnp.eye(p, dtype=a.dtype))
-        ainv = jax.vmap(back_substitute, in_axes=(None, 1), out_axes=1)(r, qt)
-        logdet = jnp.sum(jnp.log(jnp.abs(jnp.diag(r))))
+        ainv, logdet = inverse_logdet(a)
         b = rhs * mk
         theta = ainv @ b
         rss = jnp.maximum(yy - 2.0 * theta @ b + theta @ g @ theta, 1e-300 * yy)
@@ -259,7 +255,7 @@ def joint_coordinate(
     uu, sp = np.meshgrid(np.linspace(-1.0, 1.0, 41), np.linspace(0.0, speed, 41)[1:], indexing="ij")
     dcols = np.asarray(layout.columns(jnp.asarray(uu.ravel()), jnp.asarray(sp.ravel())))[:, layout.k + 1 :]
     grid_d = dcols * sp.ravel()[:, None] / scale[layout.k + 1 :]
-    pen = _penalty_terms(meta, omega_r, omega_d, layout)
+    pen = _penalty_terms(meta, omega_r, omega_d)
     out = _select(jnp.asarray(gram), jnp.asarray(rhs), yy, n, jnp.asarray(omega_r), jnp.asarray(omega_d),
                   masks, lam_r, lam_d, jnp.asarray(settings.log_lambdas), jnp.asarray(settings.log_lambdas_damping),
                   (jnp.asarray(grid_f), jnp.asarray(grid_d)), tuple(pen), layout)
@@ -294,13 +290,12 @@ def joint_coordinate(
     return (flat[: layout.k + 1], flat[off_v:off_p], flat[off_p:], cov, stats)
 
 
-def inadmissible(stiffness, velocity_damping, position_damping, equilibria, speed: float) -> list[str]:
-    """Why a global model of one DOF is not admissible over the span it is used on (the
-    equilibria widened by half their span on each side), or []: F must confine (odd degree,
-    positive leading coefficient: F -> +inf as x -> +inf, -inf as x -> -inf) and change sign
-    exactly 2n - 1 times there (its n wells and the saddles between them: no other well),
-    and the damping must dissipate, D(x, v) v >= 0 and not identically 0, for |v| <= `speed`.
-    Monomial coefficients in x, as `GlobalModel` holds them."""
+def restoring_faults(stiffness, equilibria) -> list[str]:
+    """Why a global restoring force of one DOF is not admissible, or []: it must confine (odd
+    degree, positive leading coefficient: F -> +inf as x -> +inf, -inf as x -> -inf) and change
+    sign exactly 2n - 1 times over the span it is used on, the equilibria widened by half their
+    span on each side (its n wells and the saddles between them: no other well). Monomial
+    coefficients in x, as `GlobalModel` holds them."""
     eq = np.asarray(equilibria, float)
     lo, hi = float(eq.min()), float(eq.max())
     half = 0.5 * (hi - lo)
@@ -319,13 +314,30 @@ def inadmissible(stiffness, velocity_damping, position_damping, equilibria, spee
     if changes != 2 * eq.size - 1:
         out.append(f"its restoring force changes sign {changes} times on [{lo - half:.4g}, {hi + half:.4g}] where "
                    f"{eq.size} wells and the saddles between them need {2 * eq.size - 1}")
+    return out
+
+
+def damping_faults(velocity_damping, position_damping, equilibria, speed: float) -> list[str]:
+    """Why a global damping law of one DOF is not admissible, or []: it must dissipate,
+    D(x, v) v >= 0 (within `DISSIPATION_TOLERANCE`) and not identically 0, over the span of use
+    (as `restoring_faults`) and |v| <= `speed`."""
+    eq = np.asarray(equilibria, float)
+    lo, hi = float(eq.min()), float(eq.max())
+    half = 0.5 * (hi - lo)
     xx, vv = np.meshgrid(np.linspace(lo - half, hi + half, 41), np.linspace(0.0, speed, 41)[1:], indexing="ij")
     b = np.asarray(velocity_damping, float)
     dv = np.polynomial.polynomial.polyval(xx, np.asarray(position_damping, float)) * vv**2
     dv = dv + sum(b[j] * vv ** (j + 1) for j in range(b.size))
     if not np.any(dv > 0):
-        out.append("it has no damping")
-    elif np.min(dv) < -DISSIPATION_TOLERANCE * np.max(np.abs(dv)):
+        return ["it has no damping"]
+    if np.min(dv) < -DISSIPATION_TOLERANCE * np.max(np.abs(dv)):
         i = np.unravel_index(np.argmin(dv), dv.shape)
-        out.append(f"its damping feeds energy in (D v < 0) at x = {xx[i]:.4g}, v = {vv[i]:.4g}")
-    return out
+        return [f"its damping feeds energy in (D v < 0) at x = {xx[i]:.4g}, v = {vv[i]:.4g}"]
+    return []
+
+
+def inadmissible(stiffness, velocity_damping, position_damping, equilibria, speed: float) -> list[str]:
+    """Why a global model of one DOF is not admissible over the span it is used on, or []:
+    `restoring_faults` and `damping_faults` together."""
+    return restoring_faults(stiffness, equilibria) + damping_faults(velocity_damping, position_damping, equilibria,
+                                                                    speed)

@@ -53,7 +53,14 @@ def back_substitute(r: Float[Array, "p p"], b: Float[Array, " p"]) -> Float[Arra
     return jax.lax.fori_loop(0, p, step, jnp.zeros_like(b))
 
 
-def inverse(g: Float[Array, "p p"]) -> Float[Array, "p p"]:
-    """g^-1 by the QR above and back substitution (no LAPACK getrf/getri batch kernel)."""
+def inverse_logdet(g: Float[Array, "p p"]) -> tuple[Float[Array, "p p"], Float[Array, ""]]:
+    """g^-1 and log|det g| by the QR above and back substitution (no LAPACK getrf/getri batch
+    kernel): |det g| = prod |R_kk|."""
     r, qt = householder_qr(g, jnp.eye(g.shape[0], dtype=g.dtype))
-    return jax.vmap(back_substitute, in_axes=(None, 1), out_axes=1)(r, qt)
+    inv = jax.vmap(back_substitute, in_axes=(None, 1), out_axes=1)(r, qt)
+    return inv, jnp.sum(jnp.log(jnp.abs(jnp.diag(r))))
+
+
+def inverse(g: Float[Array, "p p"]) -> Float[Array, "p p"]:
+    """g^-1 (`inverse_logdet`)."""
+    return inverse_logdet(g)[0]

@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._coordination._coordinate import GlobalCoefficients, coordinate, split_flat
-from .._coordination._joint import JointSettings, inadmissible, joint_coordinate
+from .._coordination._joint import JointSettings, damping_faults, joint_coordinate, restoring_faults
 from .._errors import GMRInputError
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, Library
 from .._fit._local_fit import AutoThreshold, LocalFit, fit_local
@@ -262,14 +262,16 @@ def _speed(fits: LocalFit, vs, w, mass: float, library: Library) -> float:
     return max(3.0 * v_max, float(np.ptp(eq)) * np.sqrt(k_max / mass))
 
 
-def _paper_route_fails(coord: Solution, fits: LocalFit, xs, vs, ys, w, mass, library) -> list[str]:
-    """Why the paper's coordination of one DOF is not to be used, or []: it failed, it is not
-    admissible (`inadmissible`), or it explains a well's own data poorly (R^2 < `MIN_R2`)."""
+def _paper_route_faults(coord: Solution, fits: LocalFit, xs, vs, ys, w, speed: float) -> dict[str, list[str]]:
+    """Why the paper's coordination of one DOF is not to be used, by kind: "data" (it failed,
+    or it explains a well's own data poorly: R^2 < `MIN_R2`), "damping" (`damping_faults`),
+    "restoring" (`restoring_faults`); empty lists where it is fine."""
     if coord.result != RESULTS.successful:
-        return [RESULTS[coord.result]]
+        return {"data": [RESULTS[coord.result]], "damping": [], "restoring": []}
     g = coord.value
-    why = inadmissible(g.stiffness, g.velocity_damping, g.position_damping, np.asarray(fits.equilibrium),
-                       _speed(fits, vs, w, mass, library))
+    eq = np.asarray(fits.equilibrium)
+    faults = {"data": [], "damping": damping_faults(g.velocity_damping, g.position_damping, eq, speed),
+              "restoring": restoring_faults(g.stiffness, eq)}
     model = GlobalModel(masses=jnp.ones(1), stiffness=g.stiffness[None], velocity_damping=g.velocity_damping[None],
                         position_damping=g.position_damping[None])
     xs, vs, ys, w = (np.asarray(a) for a in (xs, vs, ys, w))
@@ -280,19 +282,17 @@ def _paper_route_fails(coord: Solution, fits: LocalFit, xs, vs, ys, w, mass, lib
         total = np.sum((ys[k, m] - ys[k, m].mean()) ** 2)
         r2 = 1.0 - np.sum((ys[k, m] - yhat[k, m]) ** 2) / total if total > 0 else 1.0
         if not r2 >= _sanity.MIN_R2:
-            why.append(f"it explains the data of the well at x = {float(fits.equilibrium[k]):.4g} poorly (R² {r2:.3g})")
-    return why
+            faults["data"].append(f"it explains the data of the well at x = {float(eq[k]):.4g} poorly (R² {r2:.3g})")
+    return faults
 
 
-def _joint(fits: LocalFit, xs, vs, ys, w, mass: float, library: Library, restoring: Solution | None = None
-           ) -> Solution:
+def _joint(fits: LocalFit, xs, vs, ys, w, speed: float, restoring: Solution | None = None) -> Solution:
     """The joint coordination (`joint_coordinate`) as a `Solution` like `coordinate`'s; given
     the paper route's `restoring` (a `coordinate` Solution), only the damping is refitted,
     to the force left after its restoring force."""
     eq = np.asarray(fits.equilibrium)
     var = np.asarray(fits.rss) / np.maximum(np.asarray(fits.n_samples), 1.0)
     var = np.where(var > 0, var, np.max(var) if np.any(var > 0) else 1.0)
-    speed = _speed(fits, vs, w, mass, library)
     if restoring is None:
         stiff, vdamp, pdamp, cov, stats = joint_coordinate(xs, vs, ys, w, eq, var, speed)
     else:
@@ -413,21 +413,22 @@ def reconstruct(
             fits, dropped = _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_sigma, i,
                                                     failure)
         why, route = [], "gls" if coordination == "auto" else coordination
+        speed = _speed(fits, vs, w, masses[i], library) if coordination in ("auto", "joint") else None
         if coordination == "joint":
-            coord = _joint(fits, xs, vs, ys, w, masses[i], library)
+            coord = _joint(fits, xs, vs, ys, w, speed)
         else:
             coord = coordinate(fits, library, method="gls" if coordination == "auto" else coordination, throw=False)
             if coordination == "auto":
-                why = _paper_route_fails(coord, fits, xs, vs, ys, w, masses[i], library)
-                fails = [r for r in why if "explains the data" in r or "damping" not in r and "restoring" not in r]
-                damping = [r for r in why if "damping" in r]
-                if fails:
-                    coord, route = _joint(fits, xs, vs, ys, w, masses[i], library), "joint"
-                elif damping:
-                    coord, route = _joint(fits, xs, vs, ys, w, masses[i], library, restoring=coord), "gls + joint damping"
-                # A shape fault alone (even degree, turning outward, extra sign changes) is recorded in
-                # stats (`paper_route_rejected`) but not warned about here: the paper's NES truth itself turns
-                # outward, and rule 9 of `_sanity` (calibrated on it) warns where the escape is near the data.
+                faults = _paper_route_faults(coord, fits, xs, vs, ys, w, speed)
+                why = faults["restoring"] + faults["damping"] + faults["data"]
+                if faults["data"]:
+                    coord, route = _joint(fits, xs, vs, ys, w, speed), "joint"
+                elif faults["damping"]:
+                    coord, route = _joint(fits, xs, vs, ys, w, speed, restoring=coord), "gls + joint damping"
+                # A restoring-shape fault alone (even degree, turning outward, extra sign changes) is recorded
+                # in stats (`paper_route_rejected`) but not acted on or warned about here: the paper's NES truth
+                # itself turns outward, and rule 9 of `_sanity` (calibrated on it) warns where an escape is near
+                # the data.
         if coord.result != RESULTS.successful:
             failure.note(coord.result, f"DOF {i}: coordination of the equilibria "
                          f"{np.asarray(fits.equilibrium).round(6).tolist()}, condition numbers "
