@@ -7,6 +7,7 @@ import numpy as np
 
 from .._errors import GMRInputError
 from ._args import find_wells, interval, output_dir, positive_float, positive_int
+from ._progress import stage
 
 
 def register(sub):
@@ -39,6 +40,7 @@ def run(args):
     from gmr_jax.plots import config_label
 
     out = output_dir(args.out)
+    stage("loading the model, finding its wells")
     model = gmr.load_model(args.model)
     if model.topology.name != "chain":
         raise GMRInputError("gmr actuate needs a chain model (topology 'chain'): the load is a tip force")
@@ -55,6 +57,7 @@ def run(args):
         n_f=args.grid, n_A=args.grid, n_seeds=args.seeds, objective=args.objective,
         sweep=gmr.SweepSettings(settle_time=args.settle_time), sign_eps=args.sign_eps, n_knots=args.knots,
     )
+    stage(f"designing the {args.kind} load for {args.target}: (f, A) sweep, then gradient refinement")
     sol = gmr.actuate(model, args.target, kind=args.kind, settings=settings, wells=wells, throw=False)
     act, st = sol.value, sol.stats
     reached = bool(sol.result == RESULTS.successful)
@@ -82,5 +85,6 @@ def run(args):
           f"verified final configuration {doc['final_config']} ({'reached' if reached else 'NOT reached'}); "
           f"{st['solves']} ODE solves")
     print(f"wrote {out}/actuation.json")
+    stage("done")
     return 0 if reached else 1
 

@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from ._args import find_wells, grid, output_dir, positive_float, positive_int, start_configuration, tolerance
+from ._progress import stage
 
 
 def register(sub):
@@ -44,6 +45,7 @@ def run(args) -> int:
     from ..plots import basin_figure, config_label
 
     f, A = grid(args.f, "f"), grid(args.A, "A")
+    stage("loading the model, finding its wells")
     out = output_dir(args.out)
     model = gmr.load_model(args.model)
     wells, how = find_wells(model, args.x_range, args.model)
@@ -62,6 +64,7 @@ def run(args) -> int:
         print(f"\r  [{'#' * k}{'.' * (40 - k)}] {done}/{total} points, {time.perf_counter() - t0:.0f} s",
               end="", flush=True)
 
+    stage(f"integrating {n} trajectories (the first chunk compiles)")
     sol = gmr.basin_map(model, f, A, wells, x0=x0, settings=settings, chunk=args.chunk, progress=progress,
                         throw=False)
     bm = sol.value
@@ -83,4 +86,5 @@ def run(args) -> int:
         print(f"  -1 (not classified): {why}")
     print(f"{n} points in {wall:.1f} s ({n / wall:.0f} trajectories/s, compile included)")
     print(f"wrote {out}/basins.npz and basins.png")
+    stage("done")
     return 0

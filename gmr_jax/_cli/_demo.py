@@ -24,14 +24,17 @@ def register(sub):
 
 def run(args) -> int:
     from ._args import output_dir
+    from ._progress import stage
 
     output_dir(args.out)
+    stage(f"running the {args.system} demo (progress per case on stdout)")
     if args.system == "paper":
         run_demo(args.out)
     else:
         from ._demo_chain import run_chain_demo
 
         run_chain_demo(args.system, args.out)
+    stage("done")
     return 0
 
 

@@ -6,6 +6,7 @@ import numpy as np
 
 from .._errors import GMRInputError
 from ._args import add_columns_option, load_recordings, output_dir
+from ._progress import stage
 
 
 def register(sub):
@@ -57,14 +58,17 @@ def run(args) -> int:
     if args.decimate < 1:
         raise GMRInputError(f"--decimate must be >= 1, got {args.decimate}")
     out = output_dir(args.out)
+    stage(f"loading the model and {len(args.recordings) + len(args.holdout)} recording(s)")
     model = gmr.load_model(args.model)
     recs = load_recordings(args.recordings, args.columns)[0]
     hold = load_recordings(args.holdout, args.columns)[0]
     rule = gmr.SelectionRule(alpha=args.alpha, n_boot=args.n_boot)
+    stage("discovering: locate, name and select terms, holdout simulations")
     rep = gmr.discover(model, recs, hold, rule=rule, form=args.form, decimate=args.decimate, error=args.error,
                        refit_masses=args.refit_masses).value
     gmr.save_model(rep.model, out / "augmented_model.json", method="gmr discover",
                discovered=[{k: f[k] for k in ("dof", "physics", "coefficient", "ci95")} for f in rep.findings])
+    stage(f"writing {out}")
     d = rep.to_dict("augmented_model.json")
     (out / "report.json").write_text(json.dumps(_jsonable(d), indent=1))
     text = rep.summary()
@@ -75,4 +79,5 @@ def run(args) -> int:
           f"holdout: {len(hold) or 'none (estimation recordings reused)'}")
     print(text)
     print(f"wrote {out}/report.json, augmented_model.json, summary.txt" + ("" if args.no_figures else " and figures"))
+    stage("done")
     return 0

@@ -13,6 +13,7 @@ import numpy as np
 from .._errors import GMRInputError
 from .._reconstruct._sanity import GMRDataWarning
 from ._args import add_columns_option, load_recordings, positive_int
+from ._progress import stage
 
 
 def register(sub):
@@ -51,6 +52,7 @@ def data_range(recs):
 def run(args) -> int:
     import gmr_jax as gmr
 
+    stage(f"loading {len(args.recordings)} recording(s)")
     recs, load_warnings = load_recordings(args.recordings, args.columns)
     lib = gmr.Library(args.restoring_order, args.damping_order,
                       velocity_damping=not args.no_velocity_damping,
@@ -73,10 +75,12 @@ def run(args) -> int:
     fn = gmr.gmc_sindy if args.method == "gmc-sindy" else gmr.reconstruct
     if args.method == "gmr":
         kwargs["coordination"] = args.coordination
+    stage(f"{args.method}: local fits and coordination (the first run of a shape compiles)")
     with warnings.catch_warnings():  # printed below as `warning:` lines, once each
         warnings.simplefilter("ignore", GMRDataWarning)
         sol = fn(recs, lib, topology=args.topology, masses=masses, **kwargs)
     model, st = sol.value, sol.stats
+    stage(f"writing {args.out}")
     gmr.save_model(model, args.out, method=st["method"],
                    library={"r": lib.restoring_order, "d": lib.damping_order}, training=st["training"],
                    warnings=load_warnings + list(st["warnings"]), data_range=data_range(recs))
@@ -98,4 +102,5 @@ def run(args) -> int:
         print(f"gmr fit: {n_warn} warning(s) with --strict: exit status 3 (model written to "
               f"{args.out})", file=sys.stderr)
         return 3
+    stage("done")
     return 0

@@ -4,7 +4,8 @@ does the work); formats and shapes are those of the contracts (README, "File for
 Exit status: 0 success; 1 the computation failed (its RESULTS code is named); 2 the input was
 wrong (the message names the file, option or value and the fix); 3 an internal error (a bug in
 gmr_jax: one line naming it; `GMR_DEBUG=1` shows the traceback). Output piped into a reader that
-closes early (`gmr basins ... | head`) does not stop the computation.
+closes early (`gmr basins ... | head`) does not stop the computation. Long commands print
+per-stage progress lines on stderr (`_progress`); stdout keeps each command's own output.
 """
 
 import argparse
@@ -14,17 +15,31 @@ import sys
 
 from .._errors import GMRInputError
 from .._solution import GMRComputationError
-from . import _actuate, _basins, _demo, _discover, _fit, _refine
+from . import _actuate, _basins, _demo, _discover, _fit, _progress, _refine, _show, _simulate
 from ._args import join_negative_values
 
-COMMANDS = (_demo, _fit, _basins, _discover, _actuate, _refine)
+COMMANDS = (_demo, _fit, _basins, _discover, _actuate, _refine, _show, _simulate)
+
+
+def _version() -> str:
+    import importlib.metadata
+
+    try:
+        return importlib.metadata.version("gmr_jax")
+    except importlib.metadata.PackageNotFoundError:
+        return "0+unknown"
 
 
 def build_parser():
     p = argparse.ArgumentParser(prog="gmr", description="Global model reconstruction of multi-stable structures")
+    p.add_argument("--version", action="version", version=f"gmr_jax {_version()}",
+                   help="print the installed gmr_jax version and exit")
     sub = p.add_subparsers(dest="cmd", required=True)
     for cmd in COMMANDS:
-        cmd.register(sub)
+        parser = cmd.register(sub)
+        if parser.prog.split()[-1] in _progress.LONG:
+            parser.add_argument("--no-progress", action="store_true",
+                                help="no progress lines on stderr (also GMR_PROGRESS=0)")
     return p
 
 
@@ -59,9 +74,12 @@ class _QuietWhenClosed:
         return getattr(self._stream, name)
 
 
-def main(argv=None) -> int:
+def main(argv=None, *, started: float | None = None) -> int:
+    """Run `gmr ARGV`; returns the exit status. `started`: `time.perf_counter()` at process start
+    (the console script passes it): long commands then print progress lines on stderr."""
     argv = join_negative_values(sys.argv[1:] if argv is None else list(argv))
     args = build_parser().parse_args(argv)
+    _progress.start(args.cmd, started, _progress.wanted(args.cmd, argv, started))
     stdout = sys.stdout
     sys.stdout = _QuietWhenClosed(stdout)
     try:
@@ -82,6 +100,7 @@ def main(argv=None) -> int:
               "please report it with the command (GMR_DEBUG=1 shows the traceback)", file=sys.stderr)
         return 3
     finally:
+        _progress.stop()
         sys.stdout = stdout
 
 

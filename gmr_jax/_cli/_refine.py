@@ -4,6 +4,7 @@ import numpy as np
 
 from .._errors import GMRInputError
 from ._args import add_columns_option, load_recordings, output_file
+from ._progress import stage
 
 
 def register(sub):
@@ -39,6 +40,7 @@ def run(args) -> int:
     if not (np.isfinite(args.window) and args.window > 0):
         raise GMRInputError(f"--window must be a positive number of seconds, got {args.window}")
     output_file(args.out)
+    stage(f"loading the model and {len(args.recordings) + len(args.holdout or [])} recording(s)")
     model = gmr.load_model(args.model)
     train = load_recordings(args.recordings, args.columns)[0]
     hold = load_recordings(args.holdout, args.columns)[0] if args.holdout else None
@@ -46,6 +48,7 @@ def run(args) -> int:
               else optx.GaussNewton(rtol=1e-6, atol=1e-8))
     settings = gmr.RefineSettings(window=args.window, solver=solver, max_iterations=args.max_iterations,
                                   stride=args.stride, max_windows=args.max_windows)
+    stage("refining: multiple-shooting least squares (compiles the windowed solves first)")
     sol = gmr.refine(model, train, free=args.free, settings=settings, holdout=hold, throw=False)
     st = sol.stats
     ok = sol.result == RESULTS.successful
@@ -73,4 +76,5 @@ def run(args) -> int:
     for line in sol.value.equations():
         print("  " + line)
     print(f"wrote {args.out}")
+    stage("done")
     return 0
