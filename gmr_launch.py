@@ -3,7 +3,7 @@
 Importing `gmr_jax` (jax, diffrax, scipy, matplotlib) takes 2-4 s, and any module inside the
 package runs that import first. This module imports only the standard library, so that
 `gmr --version` answers at once and a long command (fit, refine, discover, actuate, basins, demo)
-prints its first progress line on stderr before the heavy import; then it hands over to
+(and simulate) prints its first progress line on stderr before the heavy import; then it hands over to
 `gmr_jax._cli._main.main` with its start time. The progress rules repeat
 `gmr_jax._cli._progress` (which it cannot import without importing gmr_jax).
 """
@@ -15,7 +15,7 @@ _T0 = time.perf_counter()
 import os  # noqa: E402
 import sys  # noqa: E402
 
-_LONG = ("fit", "refine", "discover", "actuate", "basins", "demo")
+_LONG = ("fit", "refine", "discover", "actuate", "basins", "demo", "simulate")
 
 
 def _version() -> str:

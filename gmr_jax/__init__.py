@@ -71,6 +71,7 @@ from ._simulate._inputs import (
     Sampled as Sampled,
 )
 from ._simulate._integrate import Integrator as Integrator
+from ._simulate._free_run import FreeRun as FreeRun, free_run as free_run
 from ._simulate._simulate import simulate as simulate
 
 # basins of deployment (Fig. 11)

@@ -14,7 +14,7 @@ import sys
 import time
 
 #: Commands that can run for more than a few seconds: they print progress lines.
-LONG = ("fit", "refine", "discover", "actuate", "basins", "demo")
+LONG = ("fit", "refine", "discover", "actuate", "basins", "demo", "simulate")
 
 _state = {"cmd": None, "t0": 0.0, "on": False}
 

@@ -1,7 +1,185 @@
-"""`gmr show` (being written)."""
+"""`gmr show MODEL.json`: a model file in words. The equations per DOF with the standard errors
+the file stores, the equilibria at rest with their stability, the energy barriers between
+neighbouring wells, and the training metadata and warnings written with it.
+
+Equilibria at rest (no input): each DOF (each cell of a chain) is at rest where its own
+restoring polynomial F_i(x) = sum_k K_ik x^k vanishes; stable where dF_i/dx > 0. The barrier
+from a well to the saddle beside it is the work against the restoring force,
+V(s) - V(w) with V(x) = integral of F_i(x) dx (exact: the polynomial is integrated).
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, term_name
+
+#: keys `show` prints in their own sections; any other key is listed at the end.
+_KNOWN = ("format", "topology", "masses", "terms", "method", "library", "training", "warnings", "data_range")
 
 
 def register(sub):
-    p = sub.add_parser("show", help="(being written)")
-    p.set_defaults(fn=lambda args: 0)
+    p = sub.add_parser("show", help="print a model file: equations with standard errors, wells and their "
+                       "stability, energy barriers, training metadata and warnings")
+    p.add_argument("model", help="gmr-model/1 JSON (e.g. from gmr fit)")
+    p.add_argument("--precision", type=int, default=4, help="significant digits of the numbers (default 4)")
+    p.set_defaults(fn=run)
     return p
+
+
+def equilibria(stiffness) -> list[list[tuple[float, float]]]:
+    """Per DOF, the real zeros x of F_i(x) = sum_k stiffness[i, k] x^k with the slope dF_i/dx
+    there (> 0: stable well, < 0: saddle), sorted by x (companion-matrix roots, two Newton steps)."""
+    out = []
+    for c in np.asarray(stiffness, float):
+        c = np.trim_zeros(c, "b")
+        if c.size < 2:
+            out.append([])
+            continue
+        r = np.roots(c[::-1])
+        scale = max(1.0, float(np.max(np.abs(r)))) if r.size else 1.0
+        r = np.sort(r[np.abs(r.imag) <= 1e-7 * scale].real)
+        dc = np.polynomial.polynomial.polyder(c)
+        for _ in range(2):
+            f, df = (np.polynomial.polynomial.polyval(r, a) for a in (c, dc))
+            r = np.where(df != 0, r - f / np.where(df != 0, df, 1.0), r)
+        r = np.unique(r)
+        out.append([(float(x), float(np.polynomial.polynomial.polyval(x, dc))) for x in r])
+    return out
+
+
+def barriers(stiffness, eqs) -> list[list[dict]]:
+    """Per DOF, for each saddle between two stable wells: the wells, the saddle and the energy
+    V(saddle) - V(well) from each side (V the integral of the restoring force)."""
+    out = []
+    for c, zs in zip(np.asarray(stiffness, float), eqs):
+        integ = np.polynomial.polynomial.polyint(c)
+        V = lambda x: float(np.polynomial.polynomial.polyval(x, integ))  # noqa: E731
+        rows = []
+        for k in range(1, len(zs) - 1):
+            (xl, sl), (xs, ss), (xr, sr) = zs[k - 1], zs[k], zs[k + 1]
+            if ss < 0 and sl > 0 and sr > 0:
+                rows.append({"left": xl, "saddle": xs, "right": xr,
+                             "from_left": V(xs) - V(xl), "from_right": V(xs) - V(xr)})
+        out.append(rows)
+    return out
+
+
+def _g(x, p):
+    return f"{x:.{p}g}"
+
+
+def _term_table(model, d: dict, p: int) -> list[str]:
+    """The equation and a term table (coefficient, standard error, relative error) per DOF."""
+    lines = []
+    has_se = any("stderr" in t for t in d["terms"])
+    eqs = model.equations(precision=p)
+    order = {STIFFNESS: 0, VELOCITY_DAMPING: 1, POSITION_DAMPING: 2}
+    for i in range(model.n_dof):
+        lines.append("  " + eqs[i])
+        terms = sorted((t for t in d["terms"] if t["dof"] == i and t["coefficient"] != 0),
+                       key=lambda t: (order.get(t["physics"], 3), t["order"]))
+        if not terms:
+            continue
+        lines.append(f"    {'term':16s} {'physics':17s} {'coefficient':>13s} {'std. error':>12s} {'rel.':>9s}")
+        for t in terms:
+            c, se = t["coefficient"], t.get("stderr")
+            if se is None:
+                se_s, rel_s, flag = "-", "-", ""
+            else:
+                se_s = _g(se, 3)
+                rel_s = f"{100 * se / abs(c):.2g} %"
+                flag = "  *" if abs(c) < 2 * se else ""
+            lines.append(f"    {term_name(t['physics'], t['order']):16s} {t['physics']:17s} {_g(c, p):>13s} "
+                         f"{se_s:>12s} {rel_s:>9s}{flag}")
+    if has_se:
+        lines.append("  (* = the coefficient is within 2 standard errors of 0: the data do not pin it down)")
+    else:
+        lines.append("  (no standard errors stored in this file)")
+    return lines
+
+
+def _inside(x, rng) -> bool:
+    return rng is None or rng[0] <= x <= rng[1]
+
+
+def describe(path, precision: int = 4) -> str:
+    """The text `gmr show` prints for the model file at `path` (GMRInputError on a bad file)."""
+    from .._errors import GMRInputError
+    from .._model._io import load_model
+
+    if precision < 1:
+        raise GMRInputError(f"--precision must be >= 1, got {precision}")
+    model = load_model(path)  # every key checked
+    d = json.loads(Path(path).read_text(encoding="utf-8-sig"))
+    return _describe(model, d, str(path), precision)
+
+
+def _describe(model, d: dict, name: str, p: int) -> str:
+    n = model.n_dof
+    masses = [_g(m, p) for m in np.asarray(model.masses)]
+    out = [f"{name}: {d['format']}, {n} DOF{'s' if n > 1 else ''}, topology {model.topology.name}, "
+           f"masses [{', '.join(masses)}]"]
+    method = d.get("method")
+    lib = d.get("library")
+    if method or lib:
+        libs = f"; library r={lib.get('r')}, d={lib.get('d')}" if isinstance(lib, dict) else ""
+        out.append(f"method: {method or 'not recorded'}{libs}")
+
+    out += ["", "Equations (force of each DOF, model units):"] + _term_table(model, d, p)
+
+    rng = d.get("data_range")
+    rng = None if rng is None else np.asarray(rng, float).reshape(n, 2)
+    eqs = equilibria(model.stiffness)
+    out += ["", "Equilibria at rest (F_i(x) = 0; stable where dF/dx > 0):"]
+    for i in range(n):
+        if not eqs[i]:
+            out.append(f"  DOF {i}: none (no real zero of the restoring polynomial)")
+            continue
+        for k, (x, s) in enumerate(eqs[i]):
+            kind = "stable  " if s > 0 else ("saddle  " if s < 0 else "marginal")
+            where = "" if _inside(x, None if rng is None else rng[i]) else "  (outside the training data range)"
+            out.append(f"  {'DOF ' + str(i) + ':' if k == 0 else '':7s} x = {_g(x, p):>11s}  {kind}  "
+                       f"dF/dx = {_g(s, p)}{where}")
+    n_stable = [sum(s > 0 for _, s in e) for e in eqs]
+    out.append(f"  stable wells per DOF: {n_stable}")
+
+    bars = barriers(model.stiffness, eqs)
+    out += ["", "Energy barriers between neighbouring wells (V(saddle) - V(well), V = integral of F dx):"]
+    if not any(bars):
+        out.append("  none (no DOF has two stable wells with a saddle between them)")
+    for i, rows in enumerate(bars):
+        for b in rows:
+            out.append(f"  DOF {i}: wells {_g(b['left'], p)} | {_g(b['right'], p)} over the saddle at "
+                       f"{_g(b['saddle'], p)}: {_g(b['from_left'], p)} from the left well, "
+                       f"{_g(b['from_right'], p)} from the right")
+
+    out += ["", "Training:"]
+    if rng is not None:
+        out.append("  data range of x: " + ", ".join(f"DOF {i} [{_g(a, p)}, {_g(b, p)}]"
+                                                    for i, (a, b) in enumerate(rng)))
+    tr = d.get("training")
+    if isinstance(tr, dict) and tr:
+        for rec, sc in tr.items():
+            if isinstance(sc, dict):
+                parts = [f"{k} {', '.join(_g(v, 6) for v in np.atleast_1d(sc[k]))}"
+                         for k in ("r2", "nrmse") if k in sc]
+                out.append(f"  {rec}: " + "; ".join(parts).replace("r2", "R^2").replace("nrmse", "NRMSE"))
+    elif rng is None:
+        out.append("  not recorded in this file")
+    warns = d.get("warnings") or []
+    out += ["", f"Warnings stored with the model: {len(warns) or 'none'}"]
+    out += [f"  - {w}" for w in warns]
+    extra = [k for k in d if k not in _KNOWN]
+    if extra:
+        out += ["", "Other keys:"]
+        for k in extra:
+            s = json.dumps(d[k])
+            out.append(f"  {k}: {s if len(s) <= 200 else s[:197] + '...'}")
+    return "\n".join(out)
+
+
+def run(args) -> int:
+    print(describe(args.model, args.precision))
+    return 0

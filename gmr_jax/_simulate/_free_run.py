@@ -1,0 +1,116 @@
+"""Free run of a model under a recording's measured input, against the measured displacement
+(the output error of `gmr discover`, per DOF, as one public call).
+
+The run starts from the recorded state at `sim_start` (half a Savitzky-Golay window in when v
+was estimated from x), the input is low-passed at 1.5x its band edge and interpolated by a
+cubic spline (`_discover.smooth_input`, `sampled_spline`), sgn(v) terms are smoothed to
+tanh(v / eps) with eps = 1e-3 rms(v), and the step budget grows with the record: the same
+simulation `discover` reports as output error. An x integrated from v or a is compared after the
+same drift removal (`_offset.comparable`), its unobservable equilibrium placed by the model.
+"""
+
+from dataclasses import dataclass
+
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Float
+
+from .._errors import GMRInputError
+from .._model._model import AbstractMechanicalModel
+from .._recordings._recording import Recording, load_recording, validate
+from .._solution import RESULTS, Solution, as_result, code_name, message, raise_if_failed
+from ._inputs import sampled_spline
+from ._integrate import Integrator
+from ._simulate import simulate
+
+#: a displacement farther than this many recorded spans from the recorded mean is divergence
+BOX_SPANS = 100.0
+
+
+@dataclass(frozen=True)
+class FreeRun:
+    """What `free_run` returns as `value`.
+
+    - `t` (n,): the times of the run (from the start sample on), s.
+    - `x` (n, dof): simulated displacement (NaN when the run failed).
+    - `x_measured` (n, dof): the recording's displacement over the same times.
+    - `nrmse` (dof,): ||x - x_measured|| / ||x_measured - mean|| per DOF (NaN when failed).
+    - `start`: index of the first sample in the recording; `name`: the recording's name.
+    - `notes`: how the input and x were treated (for reports).
+    """
+
+    t: Float[np.ndarray, " n"]
+    x: Float[np.ndarray, "n dof"]
+    x_measured: Float[np.ndarray, "n dof"]
+    nrmse: Float[np.ndarray, " dof"]
+    start: int
+    name: str
+    notes: tuple[str, ...] = ()
+
+    @property
+    def residual(self) -> Float[np.ndarray, "n dof"]:
+        """Model minus measurement."""
+        return self.x - self.x_measured
+
+
+def free_run(model: AbstractMechanicalModel, recording, *, columns: dict | None = None,
+             integrator: Integrator | None = None, throw: bool = True) -> Solution:
+    """Simulate `model` under `recording`'s measured input and compare with its displacement.
+
+    **Arguments:**
+
+    - `model`: a mechanical model (`load_model`, `reconstruct(...).value`, a system's truth).
+    - `recording`: a `Recording` or the path of a recording file (`columns` maps a lab file).
+    - `integrator`: tolerances and step budget (default: rtol 1e-7, atol 1e-10, at least 20
+      steps per sample).
+    - `throw`: raise `GMRComputationError` when the run fails (diverged, step budget).
+
+    **Returns:** a `Solution` whose value is a `FreeRun` and whose `result` is `successful`,
+    `diverged` (x left the box of 100 recorded spans around the recorded mean, or turned
+    non-finite) or the solver's failure code; `stats["message"]` says it in words.
+    """
+    from .._discover._discover import SIM, sim_start, smooth_input
+    from .._discover._offset import comparable, place
+
+    if not isinstance(model, AbstractMechanicalModel):
+        raise GMRInputError(f"free_run: model must be a mechanical model, got {type(model).__name__}")
+    rec = recording if isinstance(recording, Recording) else load_recording(recording, columns)
+    rec = validate(rec, rec.name)
+    if rec.n_dof != model.n_dof:
+        raise GMRInputError(f"free_run: {rec.name} has {rec.n_dof} DOF(s), the model {model.n_dof}")
+    rec = rec.complete(model.topology.name)
+    notes = ["input low-passed at 1.5x its band edge, cubic-spline interpolated"]
+    if not rec.equilibrium_observed:
+        rec = place(model, [rec])[0][0]
+        notes.append("x integrated from the recording's " + rec.integration["from"] +
+                     "; its equilibrium placed by the model, compared after the same drift removal")
+    k = sim_start(rec)
+    if k:
+        notes.append(f"started at sample {k} (v estimated from x: an interior estimate)")
+    b, f = rec.inputs()
+    inp = sampled_spline(rec.t, smooth_input(b, rec.dt), smooth_input(f, rec.dt), model.n_dof)
+    if integrator is None:
+        integrator = SIM if 20 * rec.n_samples <= SIM.max_steps else Integrator(
+            rtol=SIM.rtol, atol=SIM.atol, max_steps=int(20 * rec.n_samples))
+    xm = rec.x[k:]
+    mid, span = xm.mean(0), np.maximum(np.ptp(xm, 0), 1e-12)
+    box = (jnp.asarray(mid - BOX_SPANS * span), jnp.asarray(mid + BOX_SPANS * span))
+    eps = 1e-3 * float(np.sqrt(np.mean(rec.v**2)))
+    m = model.with_sign_eps(eps) if hasattr(model, "with_sign_eps") else model
+    sol = simulate(m, inp, jnp.asarray(rec.t[k:]), jnp.asarray(rec.x[k]), jnp.asarray(rec.v[k]),
+                   integrator=integrator, box=box, throw=False)
+    x = np.asarray(sol.value[0])
+    result = sol.result
+    if code_name(result) == "successful" and not np.all(np.isfinite(x)):
+        result = as_result(RESULTS.diverged._value)
+    ok = code_name(result) == "successful"
+    if ok and "x" in rec.derived:
+        x, xm = comparable(rec, x), comparable(rec, xm)
+    nrmse = (np.sqrt(np.sum((x - xm) ** 2, 0) / np.sum((xm - xm.mean(0)) ** 2, 0)) if ok
+             else np.full(model.n_dof, np.nan))
+    run = FreeRun(t=np.asarray(rec.t[k:]), x=x if ok else np.full_like(xm, np.nan), x_measured=xm,
+                  nrmse=nrmse, start=k, name=rec.name, notes=tuple(notes))
+    what = f"free run of the model on {rec.name}"
+    stats = {"result": code_name(result), "message": "" if ok else f"{what}: {message(result)} [{code_name(result)}]",
+             "steps": sol.stats.get("num_steps") if isinstance(sol.stats, dict) else None}
+    return raise_if_failed(Solution(value=run, result=result, stats=stats), throw, what)

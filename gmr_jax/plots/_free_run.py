@@ -1,0 +1,35 @@
+"""Figure of a free run (`gmr_jax.free_run`): simulated over measured displacement, and the
+residual (model - data) below, per DOF."""
+
+import numpy as np
+from matplotlib.figure import Figure
+
+
+def free_run_figure(run, path=None, *, x_unit: str = "recording units", title: str = "") -> Figure:
+    """Two panels per DOF: measured and simulated x against time, and the residual
+    x_model - x_measured, with its NRMSE in the legend. `path` (optional): the PNG to write; a
+    PDF is written beside it."""
+    d = run.x.shape[1]
+    fig = Figure(figsize=(10, 3.9 * d), layout="constrained")
+    axes = fig.subplots(2 * d, 1, sharex=True, squeeze=False, height_ratios=[2.2, 1] * d)[:, 0]
+    for i in range(d):
+        ax, ar = axes[2 * i], axes[2 * i + 1]
+        ax.plot(run.t, run.x_measured[:, i], color="0.25", lw=1.0, label="measured")
+        ax.plot(run.t, run.x[:, i], color="tab:red", lw=0.9, ls="--", label="model (free run)")
+        ax.set_ylabel(f"$x_{{{i}}}$ ({x_unit})")
+        ax.legend(loc="upper right", fontsize=8, ncols=2)
+        ax.set_title(f"DOF {i}: NRMSE {100 * run.nrmse[i]:.3g} %", fontsize=10, loc="left")
+        ax.grid(alpha=0.3)
+        ar.plot(run.t, run.residual[:, i], color="tab:blue", lw=0.8)
+        ar.axhline(0.0, color="0.5", lw=0.6)
+        ar.set_ylabel(f"model - data\n({x_unit})")
+        ar.grid(alpha=0.3)
+    axes[-1].set_xlabel("time (s)")
+    fig.suptitle(title or f"free run on {run.name}: model vs measurement", fontsize=11)
+    if path is not None:
+        from pathlib import Path
+
+        path = Path(path)
+        fig.savefig(path.with_suffix(".png"), dpi=120)
+        fig.savefig(path.with_suffix(".pdf"))
+    return fig
