@@ -51,6 +51,8 @@ from ._model._model import (
     GlobalModel as GlobalModel,
     from_terms as from_terms,
 )
+from ._model._predict import predict as predict
+from ._model._pysindy import from_pysindy as from_pysindy, to_pysindy as to_pysindy
 
 # reconstruction (Algorithm 1) and the GMC-SINDy baseline
 from ._reconstruct._reconstruct import (

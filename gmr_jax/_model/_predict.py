@@ -1,0 +1,78 @@
+"""Accelerations of a model over many states at once (jitted, vmapped): the vectorised
+counterpart of `AbstractMechanicalModel.accelerations`, for evaluating a model on data."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from .._errors import GMRInputError, is_tracer
+from ._model import AbstractMechanicalModel
+
+
+@eqx.filter_jit
+def _predict(model, x, v, b, f):
+    return jax.vmap(model.accelerations)(x, v, b, f)
+
+
+def _bucket(n: int) -> int:
+    """Row count compiled for n rows: the next power of two (at least 16), so that calls on
+    similar sizes share one compiled function."""
+    return max(16, 1 << (int(n) - 1).bit_length())
+
+
+def predict(
+    model: AbstractMechanicalModel,
+    x: Float[ArrayLike, "n dof"],
+    v: Float[ArrayLike, "n dof"],
+    base_acc: Float[ArrayLike, " n"] | None = None,
+    force: Float[ArrayLike, "n dof"] | None = None,
+) -> Float[Array, "n dof"]:
+    """Relative accelerations x'' of `model` at n states (x, v) under inputs, vectorised.
+
+    **Arguments:**
+
+    - `model`: a mechanical model (`GlobalModel`, a system's truth).
+    - `x`, `v`: displacements and velocities, (n, dof) (a 1-DOF model also takes (n,)).
+    - `base_acc` (n,), `force` (n, dof): inputs (default zero).
+
+    **Returns:** x'' (n, dof), the derivative of v in the first-order form; absolute
+    accelerations are `model.absolute_accelerations(xdd, base_acc)`.
+
+    Jitted and vmapped over states; concrete inputs are padded to the next power of two rows
+    so that arrays of similar length reuse one compiled function (inside a `jax.jit` it traces
+    as is).
+    """
+    if not isinstance(model, AbstractMechanicalModel):
+        raise GMRInputError(f"predict: model must be a mechanical model, got {type(model).__name__}")
+    d = model.n_dof
+    x, v = jnp.asarray(x, float), jnp.asarray(v, float)
+    if d == 1 and x.ndim == 1:
+        x, v = x[:, None], v[:, None]
+    if x.ndim != 2 or x.shape[1] != d or v.shape != x.shape:
+        raise GMRInputError(f"predict: x and v must both be (n, {d}) for this {d}-DOF model, got {x.shape} "
+                            f"and {v.shape}")
+    n = x.shape[0]
+    b = jnp.zeros(n) if base_acc is None else jnp.asarray(base_acc, float).reshape(n)
+    f = jnp.zeros((n, d)) if force is None else jnp.asarray(force, float).reshape(n, d)
+    if any(is_tracer(a) for a in (x, v, b, f)) or n == 0:
+        return _predict(model, x, v, b, f)
+    m = _bucket(n)
+    pad = ((0, m - n), (0, 0))
+    out = _predict(model, jnp.pad(x, pad), jnp.pad(v, pad), jnp.pad(b, (0, m - n)), jnp.pad(f, pad))
+    return out[:n]
+
+
+def input_gains(model: AbstractMechanicalModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The linear maps of the equation of motion, x'' = G_F F + g_b base_acc + G_f force, as
+    numpy arrays: G_F (dof, dof), g_b (dof,), G_f (dof, dof) (probed from `accelerations`,
+    which is linear in the force F and the inputs)."""
+    d = model.n_dof
+    eye, z = np.eye(d), np.zeros(d)
+    acc = lambda F, b, f: np.asarray(model.topology.accelerations(  # noqa: E731
+        jnp.asarray(F), model.masses, jnp.asarray(b, float), jnp.asarray(f)))
+    G_F = np.stack([acc(eye[k], 0.0, z) for k in range(d)], 1)
+    g_b = acc(z, 1.0, z)
+    G_f = np.stack([acc(z, 0.0, eye[k]) for k in range(d)], 1)
+    return G_F, g_b, G_f
