@@ -124,7 +124,7 @@ def _describe(model, d: dict, name: str, p: int) -> str:
     method = d.get("method")
     lib = d.get("library")
     if method or lib:
-        libs = f"; library r={lib.get('r')}, d={lib.get('d')}" if isinstance(lib, dict) else ""
+        libs = f"; local-fit library r={lib.get('r')}, d={lib.get('d')}" if isinstance(lib, dict) else ""
         out.append(f"method: {method or 'not recorded'}{libs}")
 
     out += ["", "Equations (force of each DOF, model units):"] + _term_table(model, d, p)
