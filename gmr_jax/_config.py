@@ -41,3 +41,45 @@ def use_cpu_cores(n: int | None = None, *, strict: bool = True) -> int:
             "`import gmr_jax` (or set XLA_FLAGS=--xla_force_host_platform_device_count=N)"
         ) from None
     return n
+
+
+CACHE_ENV = "GMR_CACHE_DIR"
+
+
+def default_cache_dir() -> str | None:
+    """Where compiled programs are kept between processes: `$GMR_CACHE_DIR` if set (empty or
+    "off": no cache), else `$XDG_CACHE_HOME/gmr_jax/xla` (default `~/.cache/gmr_jax/xla`)."""
+    import os
+
+    env = os.environ.get(CACHE_ENV)
+    if env is not None:
+        return None if env.strip().lower() in ("", "off", "0", "none") else os.path.expanduser(env)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "gmr_jax", "xla")
+
+
+def use_compilation_cache(path: str | None = None, *, min_compile_time: float = 0.2) -> str | None:
+    """Keep XLA's compiled programs on disk (JAX's persistent compilation cache), so that a new
+    process running the same computations (a second `gmr basins` on a model of the same
+    structure, a restarted notebook) loads them instead of compiling again.
+
+    `path`: the cache folder (default `default_cache_dir()`: `$GMR_CACHE_DIR`, else
+    `~/.cache/gmr_jax/xla`; `GMR_CACHE_DIR=off` disables it). Programs that took less than
+    `min_compile_time` seconds to compile are not stored. The command line calls this at start;
+    in a notebook, call it once after `import gmr_jax`. Returns the folder in use (None: off).
+    Entries are keyed by the program, the JAX version and the device, so a stale entry is never
+    used; delete the folder to reclaim the space.
+    """
+    import os
+
+    path = default_cache_dir() if path is None else os.path.expanduser(str(path))
+    if path is None:
+        return None
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError:  # read-only home, full disk: run without the cache rather than fail
+        return None
+    jax.config.update("jax_compilation_cache_dir", path)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_time))
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    return path

@@ -100,7 +100,7 @@ def test_joint_and_member_batching_agree_and_meet_the_tolerance():
     m = chain()
     wells = stable_wells(m, [[-0.05, 0.05]] * 2)
     f, A = jnp.linspace(0.3, 4.5, 7), jnp.linspace(0.2, 2.8, 6)
-    joint = basin_map(m, f, A, wells, chunk=8).value
+    joint = basin_map(m, f, A, wells, chunk=8, settings=SweepSettings(batching="joint")).value
     member = basin_map(m, f, A, wells, chunk=8, settings=SweepSettings(batching="member")).value
     assert np.array_equal(np.asarray(joint.config), np.asarray(member.config))
     assert np.all(np.asarray(joint.config) >= 0)
@@ -134,10 +134,11 @@ def test_failed_joint_chunk_is_rerun_point_by_point():
     wells = stable_wells(m, [[-0.05, 0.05]] * 2)
     f, A = jnp.array([0.3, 4.5]), jnp.array([0.5, 2.5])
     member = basin_map(m, f, A, wells, settings=SweepSettings(batching="member")).value
-    joint = basin_map(m, f, A, wells).value
+    joint = basin_map(m, f, A, wells, settings=SweepSettings(batching="joint")).value
     need_member, need_joint = int(np.max(member.steps)), int(np.max(joint.steps))
     assert need_joint > need_member  # the shared step costs steps
-    budget = SweepSettings(integrator=g.Integrator(rtol=1e-6, atol=1e-8, max_steps=need_member + 5))
+    budget = SweepSettings(integrator=g.Integrator(rtol=1e-6, atol=1e-8, max_steps=need_member + 5),
+                           batching="joint")
     bm = basin_map(m, f, A, wells, settings=budget).value  # the joint solve runs out, members do not
     assert np.array_equal(np.asarray(bm.config), np.asarray(member.config))
     assert np.array_equal(np.asarray(bm.steps), np.asarray(member.steps))
@@ -241,3 +242,94 @@ def test_default_chunk_scales_with_the_number_of_cells():
     from gmr_jax._basins._sweep import default_chunk
 
     assert [default_chunk(d) for d in (1, 3, 5, 10, 40)] == [512, 512, 256, 128, 64]
+    assert default_chunk(5, "lanes") == 128 and default_chunk(5, "lanes", accelerator=True) == 32_768
+
+
+# -- lanes batching: per-point step control in one vectorised loop ---------------------------
+def _grid():
+    return jnp.linspace(0.3, 4.5, 7), jnp.linspace(0.2, 2.8, 6)
+
+
+def test_lanes_match_member_and_a_tight_reference_with_per_point_steps():
+    m = chain()
+    wells = stable_wells(m, [[-0.05, 0.05]] * 2)
+    f, A = _grid()
+    lanes = basin_map(m, f, A, wells, chunk=8).value  # default batching, 8 lanes: the queue refills them
+    member = basin_map(m, f, A, wells, chunk=8, settings=SweepSettings(batching="member")).value
+    joint = basin_map(m, f, A, wells, chunk=8, settings=SweepSettings(batching="joint")).value
+    assert np.array_equal(np.asarray(lanes.config), np.asarray(member.config))
+    tight = SweepSettings(integrator=g.Integrator(rtol=1e-10, atol=1e-12, max_steps=100_000), batching="member")
+    ref = basin_map(m, f[::3], A[::2], wells, settings=tight).value
+    np.testing.assert_allclose(np.asarray(lanes.x_final)[::2, ::3], np.asarray(ref.x_final), atol=2e-4)
+    # each point's own step count: close to diffrax's per-member solve (same pair, an I-controller
+    # like the PID default), and on average below the shared step of a joint chunk
+    ls, ms = np.asarray(lanes.steps, float), np.asarray(member.steps, float)
+    assert np.all(ls <= 1.25 * ms + 5) and np.all(ls >= 0.75 * ms - 5)
+    assert ls.mean() < np.asarray(joint.steps, float).mean()
+    assert len(set(np.unique(ls).tolist())) > 5  # steps are per point, not per chunk
+
+
+@pytest.mark.parametrize("topology", ["chain", "independent"])
+@pytest.mark.parametrize("load", ["tip", "base"])
+def test_lane_field_matches_the_model_equations(topology, load):
+    import jax
+
+    from gmr_jax._basins._lanes import lane_field
+
+    terms = [{"dof": i, "physics": p, "order": o, "coefficient": c}
+             for i in range(3) for p, o, c in (("stiffness", 1, -20.0 - i), ("stiffness", 3, 3e4), ("stiffness", 2, 7.0),
+                                               ("velocity_damping", 1, 0.4), ("velocity_damping", 0, 0.05),
+                                               ("velocity_damping", 2, 0.3), ("position_damping", 2, 11.0))]
+    m = g.from_terms([0.05, 0.04, 0.03], terms, topology)
+    rng = np.random.default_rng(0)
+    x, v = jnp.asarray(rng.normal(0, 0.03, (3, 16))), jnp.asarray(rng.normal(0, 0.5, (3, 16)))
+    t, f, a = (jnp.asarray(rng.uniform(0.01, 0.3, 16)), jnp.asarray(rng.uniform(0.5, 3, 16)),
+               jnp.asarray(rng.uniform(0.1, 2, 16)))
+    got = lane_field(m, load, 3, jnp.float64)(t, x, v, f, a, 0.5 / f)
+    src = HalfSineTip if load == "tip" else HalfSineBase
+    want = jax.vmap(lambda xi, vi, ti, fi, ai: m.accelerations(xi, vi, *src(fi, ai, n_dof=3)(ti)), in_axes=(1, 1, 0, 0, 0),
+                    out_axes=1)(x, v, t, f, a)
+    np.testing.assert_allclose(np.asarray(got[3:]), np.asarray(want), rtol=1e-12, atol=1e-9)
+    np.testing.assert_array_equal(np.asarray(got[:3]), np.asarray(v))
+
+
+def test_lanes_step_budget_is_per_point():
+    m = chain()
+    wells = stable_wells(m, [[-0.05, 0.05]] * 2)
+    f, A = jnp.array([0.3, 4.5]), jnp.array([0.5, 2.5])
+    free = basin_map(m, f, A, wells).value
+    steps = np.asarray(free.steps)
+    budget = int((steps.min() + steps.max()) // 2)
+    st = SweepSettings(integrator=g.Integrator(rtol=1e-6, atol=1e-8, max_steps=budget))
+    sol = basin_map(m, f, A, wells, settings=st, throw=False)
+    res = np.asarray(sol.value.result)
+    over = steps > budget
+    assert np.all(res[over] == g.RESULTS.max_steps_reached._value)
+    assert np.all(res[~over] == g.RESULTS.successful._value)
+    assert np.array_equal(np.asarray(sol.value.config)[~over], np.asarray(free.config)[~over])
+    assert np.all(np.asarray(sol.value.config)[over] == -1)
+    with pytest.raises(g.GMRComputationError, match="max_steps"):
+        basin_map(m, f, A, wells, settings=st)
+
+
+@pytest.mark.parametrize("solver", ["dopri5", "dopri8"])
+def test_lanes_other_pairs_give_the_same_map(solver):
+    m = chain()
+    wells = stable_wells(m, [[-0.05, 0.05]] * 2)
+    f, A = _grid()
+    ref = basin_map(m, f, A, wells).value
+    other = basin_map(m, f, A, wells, settings=SweepSettings(solver=solver)).value
+    assert np.array_equal(np.asarray(other.config), np.asarray(ref.config))
+    np.testing.assert_allclose(np.asarray(other.x_final), np.asarray(ref.x_final), atol=2e-4)
+
+
+def test_float32_sweep_agrees_with_float64():
+    m = chain()
+    wells = stable_wells(m, [[-0.05, 0.05]] * 2)
+    f, A = _grid()
+    ref = basin_map(m, f, A, wells).value
+    lo = basin_map(m, f, A, wells, settings=SweepSettings(precision="float32")).value
+    assert lo.x_final.dtype == jnp.float32
+    assert np.array_equal(np.asarray(lo.config), np.asarray(ref.config))
+    with pytest.raises(g.GMRInputError, match="precision"):
+        SweepSettings(precision="float16")

@@ -19,9 +19,12 @@ from .._simulate._inputs import half_sine
 from .._simulate._integrate import Integrator, integrate, vector_field
 from .._solution import RESULTS, Solution, as_result, code_name, raise_if_failed, value_of
 from ._joint import joint_final_states
+from ._lanes import SOLVERS as LANE_SOLVERS, lanes_final_states
 
 LOADS = ("tip", "base")
-BATCHINGS = ("joint", "member")
+BATCHINGS = ("lanes", "joint", "member")
+SOLVERS = tuple(LANE_SOLVERS)
+PRECISIONS = {"float64": jnp.float64, "float32": jnp.float32}
 
 
 class SweepSettings(eqx.Module):
@@ -37,10 +40,21 @@ class SweepSettings(eqx.Module):
       span of each cell's wells) is stopped there and flagged `diverged`.
     - `load`: "tip" (default, Eq. 25: force A sin(2πft) on the last mass for t <= 1/(2f)) or
       "base" (the same half-sine as base acceleration, A in m/s²).
-    - `batching`: "joint" (default): each chunk is integrated as one ODE with one step size
-      and a max-over-members error norm (every member meets the tolerance; see `_joint`), and a
-      chunk whose joint solve fails is re-run member by member; "member": `vmap` of one solve
-      per point (each its own step size; slower: per-member book-keeping at every step).
+    - `batching`: "lanes" (default): per-point step control inside one vectorised loop (`_lanes`):
+      `chunk` lanes step together, each point with its own time, step size and accept/reject
+      decision, and a lane whose point is done takes the next point of the queue (the step
+      count per point is a scalar solver's; no member waits for the slowest); "joint": each
+      chunk integrated as one ODE with one step size and a max-over-members error norm (every
+      member meets the tolerance; see `_joint`), a chunk whose joint solve fails re-run member
+      by member; "member": `vmap` of one `diffeqsolve` per point (lockstep: a chunk runs as long
+      as its slowest member).
+    - `solver` ("lanes" only): the embedded Runge-Kutta pair, "tsit5" (default), "dopri5" or
+      "dopri8" (diffrax's tableaus); "joint" and "member" use the integrator's Tsit5.
+    - `attempts_per_pass` ("lanes" only): step attempts per pass of the loop; finished points
+      are collected and lanes refilled once per pass (measured on 2 CPU cores: 4 is about 5-10 %
+      faster than 1; compile time grows with it).
+    - `precision`: "float64" (default) or "float32" (model, states and grid cast to float32: for
+      accelerators; at rtol 1e-6 float32 needs about 3.5x the steps, `results/bench_basins_gpu.md`).
     """
 
     settle_time: float = 10.0
@@ -49,7 +63,10 @@ class SweepSettings(eqx.Module):
     v_tol: float = 0.05
     box_spans: float = 20.0
     load: str = eqx.field(static=True, default="tip")
-    batching: str = eqx.field(static=True, default="joint")
+    batching: str = eqx.field(static=True, default="lanes")
+    solver: str = eqx.field(static=True, default="tsit5")
+    attempts_per_pass: int = eqx.field(static=True, default=4)
+    precision: str = eqx.field(static=True, default="float64")
 
     def __check_init__(self):
         # plain Python on concrete values; tracers (settings built inside jit) are not inspected
@@ -57,6 +74,14 @@ class SweepSettings(eqx.Module):
             raise GMRInputError(f"SweepSettings.load must be one of {LOADS}, got {describe(self.load)}")
         if not isinstance(self.batching, str) or self.batching not in BATCHINGS:
             raise GMRInputError(f"SweepSettings.batching must be one of {BATCHINGS}, got {describe(self.batching)}")
+        if self.precision not in PRECISIONS:
+            raise GMRInputError(f"SweepSettings.precision must be one of {tuple(PRECISIONS)}, got "
+                                f"{describe(self.precision)}")
+        if not isinstance(self.attempts_per_pass, int) or self.attempts_per_pass < 1:
+            raise GMRInputError(f"SweepSettings.attempts_per_pass must be an integer >= 1, got "
+                                f"{describe(self.attempts_per_pass)}")
+        if not isinstance(self.solver, str) or self.solver not in SOLVERS:
+            raise GMRInputError(f"SweepSettings.solver must be one of {SOLVERS}, got {describe(self.solver)}")
         check_real(self.settle_time, "SweepSettings.settle_time", lo=0.0, lo_open=True,
                    fix="give the free time after the actuation in seconds, > 0 (e.g. 10.0)")
         check_real(self.x_tol, "SweepSettings.x_tol", lo=0.0, lo_open=True,
@@ -142,7 +167,18 @@ def _chunk(model, settings, x0, wells, fs, amps):
     return idx, config, code, x1, v1, steps
 
 
+def _lanes(model, settings, x0, wells, fs, amps, lanes: int):
+    """Every point of this call through `lanes` lanes with per-point step control (`_lanes`)."""
+    span, centre = _geometry(wells)
+    x1, v1, code, steps = lanes_final_states(model, settings, x0, fs, amps, centre, span, lanes, settings.solver,
+                                             settings.attempts_per_pass)
+    idx, config, code = jax.vmap(lambda x, v, c: classify(x, v, c, wells, span, settings))(x1, v1, code)
+    return idx, config, code, x1, v1, steps
+
+
 def _chunks(model, settings, x0, wells, fs, amps, chunk: int):
+    if settings.batching == "lanes":
+        return _lanes(model, settings, x0, wells, fs, amps, chunk)
     out = jax.lax.map(lambda p: _chunk(model, settings, x0, wells, p[0], p[1]),
                       (fs.reshape(-1, chunk), amps.reshape(-1, chunk)))
     return jax.tree.map(lambda o: o.reshape(-1, *o.shape[2:]), out)
@@ -168,15 +204,28 @@ def _sharded(devices: tuple, chunk: int):
     return run
 
 
-def default_chunk(n_dof: int) -> int:
-    """Points per chunk: a power of two near 1280 / dof, within [64, 512] (measured on a CPU:
-    10 DOFs 240 us/point at 128 vs 261 at 256; 3 DOFs 42 at 512 vs 46 at 256)."""
+LANES_CPU = 128  # lanes per CPU device ("lanes"; 2 cores, 3 cells: 64-256 within noise, 512 1.7x slower)
+LANES_ACCELERATOR = 32_768  # lanes per GPU/TPU (H100, 5 cells, 1e5 points: 8192 1.6x slower, 1e5 1.2x)
+
+
+def default_chunk(n_dof: int, batching: str = "joint", accelerator: bool = False) -> int:
+    """Points per chunk ("joint", "member": a power of two near 1280 / dof, within [64, 512];
+    measured on a CPU: 10 DOFs 240 us/point at 128 vs 261 at 256; 3 DOFs 42 at 512 vs 46 at 256)
+    or lanes per device ("lanes": `LANES_CPU`, `LANES_ACCELERATOR`)."""
+    if batching == "lanes":
+        return LANES_ACCELERATOR if accelerator else LANES_CPU
     return int(np.clip(2 ** round(np.log2(1280 / max(n_dof, 1))), 64, 512))
 
 
 def _traced(settings: SweepSettings) -> SweepSettings:
     """Every float setting as an array: new tolerances or settle times do not recompile."""
-    return jax.tree.map(lambda v: jnp.asarray(v, float), settings)
+    dtype = PRECISIONS[settings.precision]
+    return jax.tree.map(lambda v: jnp.asarray(v, dtype), settings)
+
+
+def _cast(tree, dtype):
+    """Floating arrays of a pytree (a model's coefficients) in `dtype`."""
+    return jax.tree.map(lambda a: a.astype(dtype) if eqx.is_inexact_array(a) else a, tree)
 
 
 def _check_inputs(model, f, A, wells, x0):
@@ -229,10 +278,10 @@ def basin_map(
     - `wells`: (dof, max_wells) stable equilibria per cell (`stable_wells`), ordered.
     - `x0`: start (default: every cell in its first well, at rest).
     - `settings`: `SweepSettings` (tolerances, settling, classification, load, batching).
-    - `chunk`: points integrated together (default `default_chunk(dof)`: 512, 256, 128 points
-      for 3, 5, 10 DOFs, about 1280 state pairs, which keeps a chunk's stages in cache on a CPU;
-      on a GPU try thousands). Points are ordered by (f, A) before chunking, so each chunk holds
-      similar actuations. The integrator's memory is per chunk; what grows with the
+    - `chunk`: under "lanes" batching the number of lanes per device (default 128 on a CPU,
+      32768 on a GPU/TPU); under "joint"/"member" the points integrated together (default
+      `default_chunk(dof)`: 512, 256, 128 points for 3, 5, 10 DOFs). Points are ordered by
+      (f, A) before chunking, so neighbouring lanes and chunks hold similar actuations. The integrator's memory is per chunk; what grows with the
       grid is the returned map and its copies, about 0.6-0.7 kB per point at peak (1e6 points:
       1.1 GB in all, `results/bench_basins_memory.md`).
     - `devices`: devices to shard the grid over (default: all of `jax.devices()`); chunks are
@@ -255,16 +304,25 @@ def basin_map(
     structure: new f, A, settle times, tolerances or coefficient values do not recompile.
     """
     f_np, a_np, wells_np, x0_np = _check_inputs(model, f, A, wells, x0)
-    wells = jnp.asarray(wells_np)
-    x0 = wells[:, 0] if x0_np is None else jnp.asarray(x0_np)
+    dtype = PRECISIONS[settings.precision]
+    wells = jnp.asarray(wells_np, dtype)
+    x0 = wells[:, 0] if x0_np is None else jnp.asarray(x0_np, dtype)
     settings_t = _traced(settings)
+    if dtype != jnp.float64:
+        model = _cast(model, dtype)
+        flat_cast = np.float32
+    else:
+        flat_cast = np.float64
     ff, aa = np.meshgrid(f_np, a_np)  # (NA, NF)
     flat_f, flat_a = ff.ravel(), aa.ravel()
     order = np.lexsort((flat_a, flat_f))  # by f, then A: similar actuations share a chunk
     n = flat_f.size
     devices = tuple(jax.devices() if devices is None else devices)
     nd = len(devices)
-    chunk = default_chunk(model.n_dof) if chunk is None else int(chunk)
+    if chunk is None:
+        accelerator = devices[0].platform != "cpu"
+        chunk = default_chunk(model.n_dof, settings.batching, accelerator)
+    chunk = int(chunk)
     if chunk < 1:
         raise GMRInputError(f"chunk must be >= 1, got {chunk}")
     chunk = min(chunk, -(-n // nd))
@@ -283,7 +341,8 @@ def basin_map(
             lambda a: np.asarray(a) if eqx.is_array(a) else a, (model, settings_t, x0, wells))
     parts = []
     for c in range(calls):
-        fs, amps = flat_f[layout[c]], flat_a[layout[c]]  # NumPy: the same global input in every process
+        fs, amps = flat_f[layout[c]].astype(flat_cast), flat_a[layout[c]].astype(flat_cast)  # NumPy: the same
+        # global input in every process
         if run is None:
             out = _sweep_points(model, settings_t, x0, wells, jnp.asarray(fs), jnp.asarray(amps), chunk)
         else:

@@ -80,6 +80,9 @@ def main(argv=None, *, started: float | None = None) -> int:
     argv = join_negative_values(sys.argv[1:] if argv is None else list(argv))
     args = build_parser().parse_args(argv)
     _progress.start(args.cmd, started, _progress.wanted(args.cmd, argv, started))
+    from .._config import use_compilation_cache
+
+    use_compilation_cache()  # a second run on similar data loads its compiled programs ($GMR_CACHE_DIR)
     stdout = sys.stdout
     sys.stdout = _QuietWhenClosed(stdout)
     try:
