@@ -69,6 +69,18 @@ def tone_recordings(sensing: str, snr: float, seed: int):
     return recs
 
 
+def _saddle() -> float:
+    """The truth's unstable equilibrium between its two wells (F = 0, found by bisection)."""
+    from scipy.optimize import brentq
+
+    lo, hi = np.sort(SYSTEM.equilibria[:, 0])
+    f = lambda x: float(SYSTEM.truth.restoring(jnp.atleast_1d(x))[0])  # noqa: E731
+    return brentq(f, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo), xtol=1e-10)
+
+
+SADDLE = _saddle()
+
+
 def cross_record():
     ts = jnp.arange(int(CROSS["duration"] * FS) + 1) / FS
     exc = gj.BaseSine(CROSS["amplitude"], CROSS["frequency"])
@@ -79,9 +91,8 @@ def cross_record():
 def hops(x) -> int:
     """Well-to-well hops with hysteresis: a hop is counted when x passes halfway from the
     saddle to the other well."""
-    eq = SYSTEM.equilibria[:, 0]
-    roots = np.sort(eq)
-    saddle = 0.176
+    roots = np.sort(SYSTEM.equilibria[:, 0])
+    saddle = SADDLE
     lo, hi = 0.5 * (roots[0] + saddle), 0.5 * (roots[1] + saddle)
     state, n = (0 if x[0] < saddle else 1), 0
     for xi in x:
@@ -165,7 +176,8 @@ def write(path, rows, true_rate, secs, seeds):
     lines = [
         "# Single-tone analogue (issue 15)", "",
         f"`python studies/single_tone.py --seeds {seeds}` ({secs / 60:.1f} min on the 2-core dev machine).", "",
-        "Truth: preloaded shallow arch (`gmr_jax.systems.shallow_arch`, non-polynomial; wells -1.090 and 0.884).",
+        f"Truth: preloaded shallow arch (`gmr_jax.systems.shallow_arch`, non-polynomial; wells -1.090 and 0.884, "
+        f"saddle {SADDLE:.3f}).",
         f"Estimation records: steady response to one base sine per well at 0.8 x its natural frequency, base "
         f"amplitude {TONE_AMPLITUDE} ({DURATION:.0f} s at {FS:.0f} Hz after {SETTLE:.0f} s settling); sensing x only, "
         "v only (equilibrium given) or x, v, a. Unseen record: base sine "

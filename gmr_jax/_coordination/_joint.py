@@ -61,6 +61,10 @@ class JointSettings(eqx.Module):
     - `log_lambdas`, `log_lambdas_damping`: log10 of the penalty weights, relative to
       trace(G) / trace(penalty) of each block.
     - `damping_only`: fit the damping alone (y already has the restoring force removed).
+    - `tie`: admissible candidates whose score is within `tie` of the best are taken as equally
+      supported by the data, and the one that extrapolates most tamely wins: the lowest highest
+      velocity power (v|v| before v^3: single-tone records at |v| <= 0.2 cannot tell them apart,
+      and v^3 damps 5 x too hard at 3), then the lowest degrees K and J. 0: the best score.
     """
 
     max_degree: int = eqx.field(static=True, default=13)
@@ -70,6 +74,7 @@ class JointSettings(eqx.Module):
     log_lambdas: tuple = eqx.field(static=True, default=(-12.0, -10.0, -8.0, -6.0, -4.0, -2.0, 0.0))
     log_lambdas_damping: tuple = eqx.field(static=True, default=(-8.0, -4.0, 0.0))
     damping_only: bool = eqx.field(static=True, default=False)
+    tie: float = eqx.field(static=True, default=0.0)
 
 
 def chebyshev(u, degree: int):
@@ -264,6 +269,9 @@ def joint_coordinate(
     admissible = shape_ok & dissipative & np.isfinite(bic)
     score = np.where(admissible, bic, np.inf)
     best = int(np.argmin(score)) if admissible.any() else int(np.nanargmin(np.where(np.isfinite(bic), bic, np.inf)))
+    if settings.tie > 0 and admissible.any():
+        near = np.nonzero(score <= score[best] + settings.tie)[0]
+        best = int(min(near, key=lambda i: (max(meta[i][2], default=1), meta[i][0], meta[i][1], score[i])))
     k, j, vel = meta[best]
     sigma2 = float(rss[best]) / max(n - float(edf[best]), 1.0)
     cov_theta = sigma2 * ainv[best] * masks[best][:, None] * masks[best][None, :]

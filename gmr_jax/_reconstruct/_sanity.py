@@ -363,6 +363,49 @@ def _potential_and_roots(stiffness, centre, half):
     return p, centre + half * u, rising, p.integ()
 
 
+def escapes(stiffness, equilibria) -> list[dict]:
+    """Where a restoring polynomial turns outward for good (F -> -inf as x -> +inf, or +inf as
+    x -> -inf): per such side, the escape point x_e (its outermost zero beyond the outermost
+    equilibrium) and the energy a motion in that outer well needs to get past it, the barrier
+    max U over [x_w, x_e] - U(x_w) (U = int F dx). Ascending coefficients of x^k."""
+    eq = np.asarray(equilibria, float)
+    s = np.trim_zeros(np.asarray(stiffness, float), "b")
+    if s.size < 2 or eq.size < 1 or not np.all(np.isfinite(s)):
+        return []
+    half = max(0.5 * float(np.ptp(eq)), 1e-300)
+    p, roots, _, pot = _potential_and_roots(s, float(eq.mean()), half)
+    k, lead = s.size - 1, s[-1]
+    out = []
+    for side, wrong, sign in (("+", lead < 0, 1.0), ("-", (-1) ** k * lead > 0, -1.0)):
+        if not wrong:
+            continue
+        x_w = float(np.max(eq)) if sign > 0 else float(np.min(eq))
+        beyond = roots[roots * sign > x_w * sign]
+        x_e = float(beyond[-1] if sign > 0 else beyond[0]) if beyond.size else x_w
+        path = np.linspace(x_w, x_e, 401)
+        out.append({"side": side, "x": x_e, "barrier": float(np.max(pot(path)) - pot(x_w))})
+    return out
+
+
+def check_escape_reach(dof: int, stiffness, equilibria, energy: float) -> list[str]:
+    """Rule 9 (d), for a coordination kept although its restoring force turns outward and no
+    redundant local datum confirms that shape (the exact interpolant of the wells' Taylor
+    coefficients, extrapolated): warn where a motion with energy up to `energy` (the bound the
+    model is used on, 1/2 m v_max^2 of `_reconstruct._speed`) gets past the escape point."""
+    out = []
+    for e in escapes(stiffness, equilibria):
+        if e["barrier"] < energy:
+            out.append(
+                f"DOF {dof}: the restoring force turns outward beyond x = {_g(e['x'])} (F -> "
+                f"{'-' if e['side'] == '+' else '+'}inf as x -> {e['side']}inf) and a motion with energy "
+                f"{_g(e['barrier'])} above its outer well gets there and runs away, below the energies the model is "
+                f"used on (up to {_g(energy)}); no recorded datum confirms that shape (the global law interpolates the "
+                f"wells' local terms exactly) and no admissible alternative explains every well's data as well: do "
+                f"not trust simulations that leave the recorded range; lower the orders, or record further out"
+            )
+    return out
+
+
 def check_global_shape(dof: int, stiffness, equilibria, amplitudes, local_stiffness) -> list[str]:
     """Rule 9: the global polynomial is measured near the recorded equilibria only; between and
     beyond them it is interpolated or extrapolated. Let [lo, hi] be the span of the recorded
