@@ -37,6 +37,14 @@ class Library(eqx.Module):
     - `restoring_order`: r, highest power of the restoring polynomial.
     - `damping_order`: d, highest power of both damping families.
     - `velocity_damping`, `position_damping`: include those families.
+
+    Examples:
+        >>> import gmr_jax as gmr
+        >>> lib = gmr.Library(restoring_order=3, damping_order=2)
+        >>> lib.names()
+        ['1', 'x', 'x^2', 'x^3', 'sgn(v)', 'v', 'sgn(v)|v|^2', 'x*v', 'x^2*v']
+        >>> lib.n_terms
+        9
     """
 
     restoring_order: int = eqx.field(static=True, default=5)

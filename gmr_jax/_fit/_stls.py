@@ -192,6 +192,17 @@ def stls(
 
     **Returns:** a `Solution` whose `value` is ξ (terms,), `stats["support"]` the active mask,
     and `aux` the coefficient covariance on the support.
+
+    Examples:
+        >>> import jax.numpy as jnp
+        >>> import gmr_jax as gmr
+        >>> x = jnp.linspace(-1.0, 1.0, 50)
+        >>> theta = jnp.stack([jnp.ones_like(x), x, x**2, x**3], axis=1)   # library 1, x, x^2, x^3
+        >>> sol = gmr.stls(theta, 2.0 * x - 0.5 * x**3, gmr.STLS(threshold=0.1, alpha=0.0))
+        >>> sol.value.round(6).tolist()
+        [0.0, 2.0, 0.0, -0.5]
+        >>> sol.stats["support"].tolist()
+        [False, True, False, True]
     """
     qr = compress(theta, y, weights)
     sol = stls_qr(qr, solver)

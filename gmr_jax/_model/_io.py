@@ -78,6 +78,19 @@ def load_model(path) -> GlobalModel:
     Anything else, a missing file, a directory, a binary file (an NPZ recording given as the
     model, say), invalid JSON, a key that appears twice, or any malformed key or term raises
     `GMRInputError` naming it and the fix.
+
+    Examples:
+        >>> import gmr_jax as gmr
+        >>> model = gmr.load_model({"format": "gmr-model/1", "topology": "independent", "masses": [1.0],
+        ...     "terms": [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -2244.0},
+        ...               {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 1755.0},
+        ...               {"dof": 0, "physics": "velocity_damping", "order": 3, "coefficient": 10.0}]})
+        >>> print(model)
+        F_0(x, v) = -2244 x + 1755 x^3 + 10 v^3
+        >>> gmr.load_model("no_such_model.json")
+        Traceback (most recent call last):
+        ...
+        gmr_jax._errors.GMRInputError: no_such_model.json: no such model file
     """
     if isinstance(path, dict):
         return model_from_dict(path, "model dict")

@@ -244,6 +244,20 @@ def from_terms(
       refused; "add": their coefficients add (used to apply corrections to a model).
 
     Raises `GMRInputError` naming the bad term and key (see `check_terms`).
+
+    Examples:
+        A two-cell chain, each cell bistable, with viscous damping:
+
+        >>> import gmr_jax as gmr
+        >>> terms = [{"dof": i, "physics": p, "order": k, "coefficient": c}
+        ...          for i in (0, 1)
+        ...          for p, k, c in [("stiffness", 1, -1.0), ("stiffness", 3, 1.0), ("velocity_damping", 1, 0.05)]]
+        >>> model = gmr.from_terms([0.1, 0.1], terms, topology="chain")
+        >>> print(model)
+        F_0(x, v) = -1 x + 1 x^3 + 0.05 v
+        F_1(x, v) = -1 x + 1 x^3 + 0.05 v
+        >>> model.n_dof, model.topology
+        (2, Chain())
     """
     masses = check_masses(masses)
     d = masses.shape[0]

@@ -43,6 +43,21 @@ def predict(
     Jitted and vmapped over states; concrete inputs are padded to the next power of two rows
     so that arrays of similar length reuse one compiled function (inside a `jax.jit` it traces
     as is).
+
+    Examples:
+        A unit mass with F(x, v) = -x + x^3 + 0.1 v: x'' = -F at rest in the input's absence.
+
+        >>> import numpy as np
+        >>> import gmr_jax as gmr
+        >>> model = gmr.from_terms([1.0], [
+        ...     {"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -1.0},
+        ...     {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 1.0},
+        ...     {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.1}])
+        >>> x = np.array([0.0, 0.5, 1.0, 2.0])
+        >>> gmr.predict(model, x, np.zeros(4))[:, 0].tolist()
+        [0.0, 0.375, 0.0, -6.0]
+        >>> gmr.predict(model, x, np.ones(4), base_acc=np.ones(4))[:, 0].tolist()
+        [-1.1, -0.725, -1.1, -7.1]
     """
     if not isinstance(model, AbstractMechanicalModel):
         raise GMRInputError(f"predict: model must be a mechanical model, got {type(model).__name__}")

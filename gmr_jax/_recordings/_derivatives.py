@@ -109,7 +109,16 @@ def differentiate(
 
     `window` (odd, samples) defaults to `auto_window` of each column. A wrong argument (NaN in x,
     dt <= 0, a window not odd or longer than x, a constant column with the automatic window)
-    raises `GMRInputError`."""
+    raises `GMRInputError`.
+
+    Examples:
+        >>> import numpy as np
+        >>> import gmr_jax as gmr
+        >>> t = np.arange(2001) * 1e-3
+        >>> v = gmr.differentiate(np.sin(2 * np.pi * t), 1e-3)        # d/dt sin(2 pi t)
+        >>> bool(np.max(np.abs(v - 2 * np.pi * np.cos(2 * np.pi * t))) < 1e-6)
+        True
+    """
     xa = np.asarray(x)
     if xa.dtype.kind not in "iuf" or isinstance(x, (bool, np.bool_)):
         raise GMRInputError(f"differentiate: x must be an array of real numbers, got dtype {xa.dtype}")

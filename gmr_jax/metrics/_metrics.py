@@ -50,7 +50,20 @@ def damping_error(model, truth, dof: int, x_range, v_range, n: int = 101) -> flo
 def equilibria(model, dof: int, x_range, n: int = 4001):
     """Zeros of the restoring force of `dof` in `x_range`, with stability (dF/dx > 0).
 
-    Returns a list of (x, stable) sorted by x."""
+    Returns a list of (x, stable) sorted by x.
+
+    Examples:
+        The bistable joint's restoring force -2244 x + 1755 x^3: two wells and a saddle.
+
+        >>> import gmr_jax as gmr
+        >>> model = gmr.from_terms([1.0], [
+        ...     {"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -2244.0},
+        ...     {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 1755.0}])
+        >>> [(round(x, 4), stable) for x, stable in gmr.metrics.equilibria(model, 0, (-2.0, 2.0))]
+        [(-1.1308, True), (0.0, False), (1.1308, True)]
+        >>> [(round(x, 4), round(e, 1)) for x, e in gmr.metrics.energy_barriers(model, 0, (-2.0, 2.0))]
+        [(-1.1308, 717.3), (1.1308, 717.3)]
+    """
     xs = np.linspace(*x_range, n)
     f = _grid_forces(model, dof, xs, np.zeros(1), "restoring")[:, 0]
     out = []
