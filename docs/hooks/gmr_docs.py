@@ -36,7 +36,7 @@ def on_config(config):
     root = _root(config)
     sections = {
         "Notebooks": [{_title(root / p): p} for p in _sources(root, "notebooks")],
-        "Results": ["results/README.md"] + [
+        "Results": ["results/README.md", {"Figures": _GALLERY}] + [
             {p.split("/")[-1]: p} for p in _sources(root, "results")
             if p.endswith(".md") and p != "results/README.md"
         ],
@@ -72,7 +72,28 @@ def on_files(files, config):
             if files.get_file_from_path(rel) is None:
                 files.append(File(rel, src_dir=str(root), dest_dir=config.site_dir,
                                   use_directory_urls=config.use_directory_urls))
+    files.append(File.generated(config, _GALLERY, content=_gallery(root)))
     return files
+
+
+_GALLERY = "results/figures.md"
+
+
+def _gallery(root: Path) -> str:
+    """A page showing every figure in results/figures/, each under its file name, with the result
+    tables that refer to it."""
+    tables = {p: (root / p).read_text(encoding="utf-8") for p in _sources(root, "results") if p.endswith(".md")}
+    lines = ["# Figures", "", "Every figure in `results/figures/`, as the studies wrote it; the tables that",
+             "show it are linked under each one.", ""]
+    for rel in _sources(root, "results"):
+        if not rel.startswith("results/figures/") or rel.endswith(".md"):
+            continue
+        name = rel.split("/")[-1]
+        used = [p.split("/")[-1] for p, text in tables.items() if f"figures/{name}" in text]
+        lines += [f"## {name}", "", f"![{name}](figures/{name})", ""]
+        if used:
+            lines += ["In: " + ", ".join(f"[{u}]({u})" for u in used), ""]
+    return "\n".join(lines)
 
 
 _CLI_MARKER = "<!-- gmr-cli-help -->"
