@@ -59,7 +59,7 @@ def test_the_public_api_has_docstring_examples():
     # the examples below are the ones a reader meets first; losing them silently is a regression
     names = {t.name for t in DOCTESTS}
     for expected in ("gmr_jax.Library", "gmr_jax.stls", "gmr_jax.from_terms", "gmr_jax.predict",
-                     "gmr_jax.load_model", "gmr_jax.metrics.equilibria"):
+                     "gmr_jax.load_model", "gmr_jax.simulate", "gmr_jax.metrics.equilibria"):
         assert any(n == expected or n.startswith(expected + ".") for n in names), expected
 
 

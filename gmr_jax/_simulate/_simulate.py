@@ -46,6 +46,23 @@ def simulate(
     A wrong argument (x0 or v0 not one finite value per DOF, ts not strictly increasing or with
     fewer than 2 times, an unknown model or input type) raises `GMRInputError` before any work;
     values are checked only when concrete, so `simulate` stays usable under jit/vmap/grad.
+
+    Examples:
+        A damped double well released near its saddle settles in the right-hand well x = 1:
+
+        >>> import jax.numpy as jnp
+        >>> import gmr_jax as gmr
+        >>> model = gmr.from_terms([1.0], [
+        ...     {"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -1.0},
+        ...     {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 1.0},
+        ...     {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.5}])
+        >>> sol = gmr.simulate(model, gmr.NoInput(), jnp.linspace(0.0, 40.0, 5), jnp.array([0.3]),
+        ...                    throw=False)
+        >>> bool(sol.result == gmr.RESULTS.successful)
+        True
+        >>> x, v = sol.value
+        >>> x.shape, round(float(x[-1, 0]), 4)
+        ((5, 1), 1.0)
     """
     _check_inputs(model, inputs, ts, x0, v0, integrator, box)
     return _simulate(model, inputs, ts, x0, v0, integrator, box=box, throw=throw)
