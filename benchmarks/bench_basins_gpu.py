@@ -29,7 +29,7 @@ import numpy as np  # noqa: E402
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-import gmr_jax as g  # noqa: E402
+import gmr_jax  # noqa: E402, F401  (enables float64 before jax is used)
 import jax  # noqa: E402
 
 import bench_basins as bb  # noqa: E402

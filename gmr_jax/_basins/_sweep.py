@@ -310,9 +310,6 @@ def basin_map(
     settings_t = _traced(settings)
     if dtype != jnp.float64:
         model = _cast(model, dtype)
-        flat_cast = np.float32
-    else:
-        flat_cast = np.float64
     ff, aa = np.meshgrid(f_np, a_np)  # (NA, NF)
     flat_f, flat_a = ff.ravel(), aa.ravel()
     order = np.lexsort((flat_a, flat_f))  # by f, then A: similar actuations share a chunk
@@ -341,7 +338,7 @@ def basin_map(
             lambda a: np.asarray(a) if eqx.is_array(a) else a, (model, settings_t, x0, wells))
     parts = []
     for c in range(calls):
-        fs, amps = flat_f[layout[c]].astype(flat_cast), flat_a[layout[c]].astype(flat_cast)  # NumPy: the same
+        fs, amps = flat_f[layout[c]].astype(dtype), flat_a[layout[c]].astype(dtype)  # NumPy: the same
         # global input in every process
         if run is None:
             out = _sweep_points(model, settings_t, x0, wells, jnp.asarray(fs), jnp.asarray(amps), chunk)

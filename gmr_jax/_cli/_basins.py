@@ -38,6 +38,24 @@ def register(sub):
     return b
 
 
+_COMPILE = {"seconds": 0.0, "listening": False}
+
+
+def _compile_seconds() -> float:
+    """XLA compile time of this process so far (one listener, registered on first use: a second
+    `run` in the same process, e.g. in tests, does not add another)."""
+    if not _COMPILE["listening"]:
+        import jax
+
+        def listen(event, secs, **kwargs):
+            if event == "/jax/core/compile/backend_compile_duration":
+                _COMPILE["seconds"] += secs
+
+        jax.monitoring.register_event_duration_secs_listener(listen)
+        _COMPILE["listening"] = True
+    return _COMPILE["seconds"]
+
+
 def run(args) -> int:
     import gmr_jax as gmr
 
@@ -66,10 +84,7 @@ def run(args) -> int:
         print(f"\r  [{'#' * k}{'.' * (40 - k)}] {done}/{total} points, {time.perf_counter() - t0:.0f} s",
               end="", flush=True)
 
-    compiled = []  # XLA compile times of this sweep (none when the compilation cache had it)
-    jax.monitoring.register_event_duration_secs_listener(
-        lambda event, secs, **kw: compiled.append(secs) if event == "/jax/core/compile/backend_compile_duration"
-        else None)
+    compiled_before = _compile_seconds()
     stage(f"integrating {n} trajectories (compiling unless the compilation cache has it)")
     sol = gmr.basin_map(model, f, A, wells, x0=x0, settings=settings, chunk=args.chunk, progress=progress,
                         throw=False)
@@ -90,7 +105,7 @@ def run(args) -> int:
         codes, cc = np.unique(cat["result"][bad], return_counts=True)
         why = ", ".join(f"{c} {code_name(k).replace('_', ' ')}" for k, c in zip(codes, cc))
         print(f"  -1 (not classified): {why}")
-    comp = sum(compiled)
+    comp = _compile_seconds() - compiled_before
     print(f"{n} points in {wall:.1f} s ({n / wall:.0f} trajectories/s); of which compiling {comp:.1f} s"
           + ("" if comp > 0 else " (compiled programs loaded from the cache)"))
     print(f"wrote {out}/basins.npz and basins.png")

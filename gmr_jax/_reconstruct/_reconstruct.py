@@ -505,8 +505,7 @@ def reconstruct(
                         coord, route = _joint(fits, xs, vs, ys, w, speed, restoring=paper), "gls + joint damping"
                     if route != "joint" and unconfirmed:
                         warnings += _sanity.check_escape_reach(i, np.asarray(paper.value.stiffness),
-                                                               np.asarray(fits.equilibrium),
-                                                               0.5 * float(masses[i]) * speed**2)
+                                                               np.asarray(fits.equilibrium), energy)
                     elif route != "joint" and faults["restoring"] and _redundancy(paper) > 0:
                         why = why + [f"kept: {_redundancy(paper)} local conditions beyond the global law's "
                                      f"coefficients confirm its shape"]

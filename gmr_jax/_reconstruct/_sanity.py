@@ -363,6 +363,19 @@ def _potential_and_roots(stiffness, centre, half):
     return p, centre + half * u, rising, p.integ()
 
 
+def _outward_sides(s, eq, roots):
+    """Each side where the polynomial `s` (ascending, trimmed) turns outward for good (F -> -inf
+    as x -> +inf, or +inf as x -> -inf): (side "+"/"-", sign, x_w the outermost equilibrium on
+    that side, x_e the outermost real zero beyond it, x_w if none)."""
+    k, lead = s.size - 1, s[-1]
+    for side, wrong, sign in (("+", lead < 0, 1.0), ("-", (-1) ** k * lead > 0, -1.0)):
+        if not wrong:
+            continue
+        x_w = float(np.max(eq)) if sign > 0 else float(np.min(eq))
+        beyond = roots[roots * sign > x_w * sign]
+        yield side, sign, x_w, float(beyond[-1] if sign > 0 else beyond[0]) if beyond.size else x_w
+
+
 def escapes(stiffness, equilibria) -> list[dict]:
     """Where a restoring polynomial turns outward for good (F -> -inf as x -> +inf, or +inf as
     x -> -inf): per such side, the escape point x_e (its outermost zero beyond the outermost
@@ -374,14 +387,8 @@ def escapes(stiffness, equilibria) -> list[dict]:
         return []
     half = max(0.5 * float(np.ptp(eq)), 1e-300)
     p, roots, _, pot = _potential_and_roots(s, float(eq.mean()), half)
-    k, lead = s.size - 1, s[-1]
     out = []
-    for side, wrong, sign in (("+", lead < 0, 1.0), ("-", (-1) ** k * lead > 0, -1.0)):
-        if not wrong:
-            continue
-        x_w = float(np.max(eq)) if sign > 0 else float(np.min(eq))
-        beyond = roots[roots * sign > x_w * sign]
-        x_e = float(beyond[-1] if sign > 0 else beyond[0]) if beyond.size else x_w
+    for side, _, x_w, x_e in _outward_sides(s, eq, roots):
         path = np.linspace(x_w, x_e, 401)
         out.append({"side": side, "x": x_e, "barrier": float(np.max(pot(path)) - pot(x_w))})
     return out
@@ -449,12 +456,7 @@ def check_global_shape(dof: int, stiffness, equilibria, amplitudes, local_stiffn
     grid = np.linspace(lo, hi, 401)
     depth = float(np.ptp(pot(grid)))
     k, lead = s.size - 1, s[-1]
-    for side, wrong, sign in (("+", lead < 0, 1.0), ("-", (-1) ** k * lead > 0, -1.0)):
-        if not wrong:
-            continue
-        x_w = float(np.max(eq)) if sign > 0 else float(np.min(eq))
-        beyond = roots[roots * sign > x_w * sign]
-        x_e = float(beyond[-1] if sign > 0 else beyond[0]) if beyond.size else x_w
+    for side, sign, x_w, x_e in _outward_sides(s, eq, roots):
         barrier = float(pot(x_e) - pot(x_w))
         if barrier < ESCAPE_RATIO * depth:
             out.append(
