@@ -92,8 +92,24 @@ from ._discover._catalogue import Term as Term, default_catalogue as default_cat
 from ._discover._discover import DiscoveryReport as DiscoveryReport, discover as discover
 from ._discover._select import SelectionRule as SelectionRule
 
-# browsable namespaces
-from . import data as data, metrics as metrics, plots as plots, systems as systems
+# browsable namespaces, imported on first use (`gmr.plots` loads matplotlib, `gmr.systems` and
+# `gmr.data` parts of scipy: ~1 s that `gmr fit` on a 2-core machine need not pay at start-up)
+_NAMESPACES = ("data", "metrics", "plots", "systems")
+
+
+def __getattr__(name: str):
+    if name in _NAMESPACES:
+        import importlib
+
+        module = importlib.import_module(f".{name}", __name__)
+        globals()[name] = module
+        return module
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_NAMESPACES))
+
 
 try:
     __version__ = _metadata.version("gmr_jax")

@@ -82,7 +82,7 @@ def main(argv=None, *, started: float | None = None) -> int:
     _progress.start(args.cmd, started, _progress.wanted(args.cmd, argv, started))
     from .._config import use_compilation_cache
 
-    use_compilation_cache()  # a second run on similar data loads its compiled programs ($GMR_CACHE_DIR)
+    use_compilation_cache(min_compile_time=0.0)  # a second run on similar data loads its compiled programs ($GMR_CACHE_DIR)
     stdout = sys.stdout
     sys.stdout = _QuietWhenClosed(stdout)
     try:

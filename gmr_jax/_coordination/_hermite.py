@@ -16,12 +16,12 @@ stable sort, masked rows/columns replaced by the identity), so the solve jits an
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
-from scipy.special import comb
 
 
 def _binom_table(n: int) -> np.ndarray:
-    k = np.arange(n)
-    return comb(k[None, :], k[:, None])  # [j, k] = C(k, j)
+    import math
+
+    return np.array([[float(math.comb(k, j)) for k in range(n)] for j in range(n)])  # [j, k] = C(k, j)
 
 
 def highest_order(support: Bool[Array, "... orders"]) -> Int[Array, "..."]:

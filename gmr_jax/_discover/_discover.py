@@ -25,7 +25,6 @@ from dataclasses import dataclass, field
 
 import jax.numpy as jnp
 import numpy as np
-from scipy.signal import butter, filtfilt
 
 from .._errors import GMRInputError
 from .._solution import RESULTS, Solution, code_name, message, raise_if_failed
@@ -110,6 +109,8 @@ def smooth_input(u: np.ndarray, dt: float) -> np.ndarray:
             continue
         fc = 1.5 * band_edge(u[:, k], dt)
         if 0 < fc < 0.45 / dt:
+            from scipy.signal import butter, filtfilt
+
             bb, aa = butter(4, fc * 2 * dt)
             out[:, k] = filtfilt(bb, aa, u[:, k])
     return out

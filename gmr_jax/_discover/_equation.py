@@ -25,7 +25,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
-from scipy.signal import decimate as _decimate
 
 from .._reconstruct._reconstruct import regression_targets
 from .._recordings._derivatives import band_edge
@@ -89,6 +88,8 @@ def _integrate(sig: np.ndarray, kernel: np.ndarray, stride: int, dt: float) -> n
 
 
 def _pdecimate(a: np.ndarray, q: int, trim: int) -> np.ndarray:
+    from scipy.signal import decimate as _decimate
+
     out = _decimate(a, q, ftype="iir", zero_phase=True, axis=0)
     return out[trim: out.shape[0] - trim]
 

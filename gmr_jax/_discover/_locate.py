@@ -21,7 +21,6 @@ is summarised by
 """
 
 import numpy as np
-from scipy.signal import welch
 
 
 def _ccf(a, b, max_lag):
@@ -87,6 +86,8 @@ def locate(r, x, v, dt, u=None, *, bins: int = 12, max_lag: int = 50) -> dict:
     wins = np.array_split(r, nw)
     wr = np.array([np.sqrt(np.mean(w**2)) for w in wins])
     nper = min(1024, r.size)
+    from scipy.signal import welch
+
     f, p = welch(r, fs=1.0 / dt, nperseg=nper)
     c = np.cumsum(p) / (np.sum(p) + 1e-300)
     lo, hi = f[np.searchsorted(c, 0.05)], f[min(np.searchsorted(c, 0.95), f.size - 1)]

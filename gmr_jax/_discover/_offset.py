@@ -19,7 +19,7 @@ from dataclasses import replace
 
 import numpy as np
 from numpy.polynomial import polynomial as P
-from scipy.special import comb
+from math import comb
 
 from .._errors import GMRInputError
 from .._reconstruct._reconstruct import regression_targets

@@ -35,7 +35,6 @@ from dataclasses import dataclass, field
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.stats import f as f_dist
 
 from .._errors import as_whole_number, check_real
 
@@ -167,6 +166,8 @@ def _grams(Z, y, n_folds):
 def _f_pvalue(rss0, rss1, n_eff, p1):
     d2 = max(n_eff - p1, 1.0)
     F = max(rss0 - rss1, 0.0) / max(rss1 / d2, 1e-300)
+    from scipy.stats import f as f_dist
+
     return float(f_dist.sf(F, 1, d2))
 
 
@@ -231,6 +232,8 @@ def select_terms(X_base: np.ndarray, X_cand: np.ndarray, y: np.ndarray,
     bB = jnp.asarray((gy[starts + block] - gy[starts]).sum(1))
     yyB = jnp.asarray((y2[starts + block] - y2[starts]).sum(1))
     del gg, gy
+    from scipy.stats import f as f_dist
+
     n_eff = n / tau
     SB = np.repeat(base[None], rule.n_boot, 0)
     rssB = np.asarray(jax.vmap(rss, in_axes=(0, 0, 0, 0))(GB, bB, yyB, jnp.asarray(SB)))

@@ -19,7 +19,6 @@ Edges use the same fitted polynomial (scipy's `mode="interp"`).
 """
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from .._errors import GMRInputError, as_whole_number, check_real
 
@@ -143,11 +142,13 @@ def differentiate(
                                  fix="give an odd number of samples larger than polyorder, or None")
         if window % 2 == 0 or window > n:
             raise GMRInputError(f"differentiate: window must be odd and at most {n} (the samples), got {window}")
+    from scipy.signal import savgol_filter as _savgol  # imported here: scipy.signal costs ~0.5 s at start-up
+
     out = np.empty_like(x)
     for k in range(x.shape[1]):
         if window is None and np.ptp(x[:, k]) == 0:
             raise GMRInputError(f"differentiate: x of column {k} is constant: no signal to set the window "
                                 f"from (nothing to fit); pass window=, or drop that column")
         w = window or auto_window(x[:, k], dt, polyorder)
-        out[:, k] = savgol_filter(x[:, k], w, polyorder, deriv=order, delta=dt, mode="interp")
+        out[:, k] = _savgol(x[:, k], w, polyorder, deriv=order, delta=dt, mode="interp")
     return out

@@ -26,7 +26,6 @@ to the base; `Recording.complete(topology)` turns those into the cell deformatio
 """
 
 import numpy as np
-from scipy.integrate import cumulative_trapezoid
 
 from .._errors import GMRInputError
 from ._derivatives import FLOOR_RATIO, floor_spectrum
@@ -80,7 +79,7 @@ def integrate(s: np.ndarray, dt: float, f_hp: float, times: int = 1) -> np.ndarr
     values and what a sensor's bias integrates to), then the content below `f_hp`."""
     y = np.asarray(s, float)
     for _ in range(times):
-        y = cumulative_trapezoid(y, dx=dt, initial=0.0)
+        y = np.concatenate([[0.0], np.cumsum(0.5 * dt * (y[1:] + y[:-1]))])  # cumulative trapezoid
     return remove_drift(detrend(y, times), dt, f_hp)
 
 

@@ -21,8 +21,6 @@ automatic Savitzky-Golay window (hundreds of samples, set by the slow trajectory
 from importlib import resources
 
 import numpy as np
-from scipy.signal import butter, filtfilt
-from scipy.signal import decimate as _sp_decimate
 
 from .._errors import GMRInputError
 from .._recordings._mapping import read_mat, squeeze
@@ -84,6 +82,8 @@ def lowpass_derivatives(
         nyq = 0.5 / dt
         if not 0 < cutoff_hz < nyq:
             raise GMRInputError(f"cutoff_hz must lie in (0, {nyq:g}) Hz, got {cutoff_hz}")
+        from scipy.signal import butter, filtfilt
+
         b, a = butter(order, cutoff_hz / nyq)
         xf = filtfilt(b, a, x, axis=0)
     v = np.gradient(xf, dt, axis=0)
@@ -95,6 +95,8 @@ def parallel_decimate(signals: dict, q: int) -> dict:
     Chebyshev I, cut-off 0.8 x the new Nyquist frequency, as MATLAB's `decimate`)."""
     if q == 1:
         return dict(signals)
+    from scipy.signal import decimate as _sp_decimate
+
     return {k: _sp_decimate(np.asarray(s, float), q, ftype="iir", zero_phase=True)
             for k, s in signals.items()}
 
