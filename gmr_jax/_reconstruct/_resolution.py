@@ -1,0 +1,344 @@
+"""What each well's data resolve, and the excitation that would resolve what they do not (issue 15).
+
+The coordination (Eqs. 12-21) builds the global restoring force from the Taylor coefficients
+a_k = F^(k)(x_i) / k! that the local fits (Eq. 8) measure at each well. Between the wells it can
+only be as good as those coefficients: with the exact value, slope and curvature at every well
+(the "curvature oracle") a non-polynomial truss is 2.6 % off, with value and slope alone 14.6 %.
+This module says, per DOF (cell) and well, which of F, F', F'', F''' the well's records resolve,
+which of those the global model needs, and how to excite so that a missing one is resolved.
+
+**Resolved.** Order k at a well is resolved when the local fit kept it with |c_k| >= `T_RESOLVED`
+(3) standard errors (significant), or when its noise-limited standard error se_k, carried over
+half the distance h to the nearest other well, is at most `BOUND_FRACTION` (1 %) of the well's
+force scale k_1 h (se_k h^k <= 0.01 k_1 h: the data bound it, whatever its value, below what
+could matter between the wells). se_k is that of the hierarchical least-squares fit of the
+well's data on 1, q, ..., q^k plus the damping terms the local fit kept (the term tested last,
+so no higher-order column inflates it).
+
+**Needed.** F, F' and F'' at every well (the curvature oracle's data; the issue's target is
+to come within 2x of it), and F''' where the global model's own Taylor coefficient there, a_3^G
+h^3, is at least `BOUND_FRACTION` of k_1 h (it shapes the force between the wells).
+
+**Advice (scaling argument).** The least-squares standard error of the q^k coefficient is
+se_k = sigma_y / (sqrt(N_eff) rms(q^k | lower columns)), and rms(q^k | ...) = g_k A^k, with
+A the vibration amplitude and g_k (0 < g_k <= 1, `collinearity`) the share of q^k not
+explained by the other columns: the record's harmonic content (a pure tone has g_3 = 0.32,
+since q^3 = A^3 (3/4 sin - 1/4 sin 3wt) is 90 % collinear with q; a broadband Gaussian-like
+response g_3 = 0.63, g_2 = 0.82). At a fixed SNR the force noise sigma_y grows like A (an
+accelerometer's noise relative to its signal), so se_k ~ A^(1-k) / (10^(SNR/20) sqrt(N));
+with a fixed noise floor se_k ~ A^-k (then less amplitude is needed than advised). Order k
+becomes resolved when se_k falls by the factor rho = min(se_k h^(k-1) / (0.01 k_1),
+3 se_k / |a_k^G|) (bounded, or significant at the global model's own value), i.e. at the
+amplitude A rho^(1/(k-1)), or with rho^2 times the samples, or 20 log10(rho) dB more SNR;
+when the record is narrow-band (g_k below 0.8 of the broadband value) a sweep over about
+0.5-2 x the well's natural frequency gains (g_broad / g_k). The advice is checked by
+simulation in `studies/stress_cases.py` (refit at the advised amplitude).
+
+**Warning.** Every well with a needed order unresolved is reported as a `GMRDataWarning`
+with its advice (`ResolutionReport.warnings`); `ResolutionReport.unresolved_everywhere` lists,
+per DOF, the needed orders that no well resolved.
+"""
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING
+
+#: |coefficient| / standard error at which a kept local term counts as resolved (the default screen).
+T_RESOLVED = 3.0
+#: A term is bounded (resolved as negligible) when se_k h^k <= this share of k_1 h, and needed
+#: (F''' only; F, F', F'' always) when the global model's a_k h^k exceeds it.
+BOUND_FRACTION = 0.01
+#: The orders every well must resolve: F, F', F'' (the curvature oracle's data).
+NEEDED_ORDER = 2
+#: Orders reported: F, F', F'', F'''.
+ORDERS = (0, 1, 2, 3)
+NAMES = ("F", "F'", "F''", "F'''")
+#: g_k of a broadband (Gaussian) response, for the bandwidth advice: 1 / sqrt(VIF) of q^k on
+#: 1, q, ..., q^(k-1) for q ~ N(0, 1).
+G_BROADBAND = {1: 1.0, 2: float(np.sqrt(2.0 / 3.0)), 3: float(np.sqrt(0.4))}
+#: Advised amplitudes above this share of the distance to the nearest other well leave the
+#: small-vibration regime (`_sanity.LARGE_AMPLITUDE_RATIO`): then advise more samples or SNR.
+MAX_ADVISED_RATIO = 0.3
+
+
+@dataclass(frozen=True)
+class TermResolution:
+    """One Taylor order k at one well: the local fit's coefficient and standard error (0, 0
+    when dropped), the hierarchical fit's standard error `se_h`, the global model's
+    coefficient `global_coef`, the collinearity share `g`, the verdicts and the advised
+    amplitude ratio (None when resolved or not needed)."""
+
+    order: int
+    coef: float
+    se: float
+    se_h: float
+    global_coef: float
+    g: float
+    significant: bool
+    bounded: bool
+    needed: bool
+    rho: float = 1.0
+    advised_ratio: float | None = None
+
+    @property
+    def resolved(self) -> bool:
+        return self.bounded
+
+    @property
+    def t(self) -> float:
+        return abs(self.coef) / self.se if self.se > 0 else (np.inf if self.coef != 0 else 0.0)
+
+
+@dataclass(frozen=True)
+class WellResolution:
+    """What one well's records resolve (`terms`: F, F', F'', F''') and where they stand:
+    amplitude (99.9th percentile of |x - x_i|) as a ratio of the distance to the nearest other
+    well, natural frequency f_n, the band (Hz) holding 5-95 % of the motion's power, samples."""
+
+    dof: int
+    well: int
+    equilibrium: float
+    recordings: list
+    amplitude: float
+    distance: float
+    f_natural: float
+    band: tuple
+    n_samples: int
+    terms: list = field(default_factory=list)
+
+    @property
+    def ratio(self) -> float:
+        return self.amplitude / self.distance if self.distance > 0 else np.inf
+
+    def missing(self) -> list[TermResolution]:
+        return [t for t in self.terms if t.needed and not t.resolved]
+
+    def advice(self) -> str | None:
+        """Plain words for the needed orders this well does not resolve, None if none."""
+        miss = self.missing()
+        if not miss:
+            return None
+        names = ", ".join(NAMES[t.order] for t in miss)
+        worst = max(miss, key=lambda t: t.advised_ratio if t.advised_ratio is not None else np.inf)
+        k, rho = worst.order, worst.rho
+        narrow = (self.band[1] - self.band[0]) < 0.5 * self.f_natural
+        parts = []
+        if worst.advised_ratio is not None and worst.advised_ratio <= MAX_ADVISED_RATIO:
+            parts.append(f"excite it to about {100 * worst.advised_ratio:.2g} % of the interwell distance "
+                         f"(now {100 * self.ratio:.2g} %; x{worst.advised_ratio / self.ratio:.2g} the amplitude)")
+        else:
+            parts.append(f"more amplitude alone would leave the small-vibration regime (it would need "
+                         f"{'>' if worst.advised_ratio is None else ''}"
+                         f"{100 * (worst.advised_ratio or MAX_ADVISED_RATIO):.2g} % of the interwell distance)")
+        parts.append(f"or record {rho**2:.2g} x as many samples, or {20 * np.log10(rho):.2g} dB more SNR")
+        gb = G_BROADBAND.get(k, G_BROADBAND[3])
+        if narrow or worst.g < 0.8 * gb:
+            parts.append(f"the record is narrow-band ({self.band[0]:.3g}-{self.band[1]:.3g} Hz, g_{k} = {worst.g:.2f}); "
+                         f"a sweep over about {0.5 * self.f_natural:.3g}-{2 * self.f_natural:.3g} Hz "
+                         f"(0.5-2 x f_n) would raise g_{k} towards {gb:.2f}")
+        return (f"DOF {self.dof}, well at x = {self.equilibrium:.5g} ({', '.join(self.recordings)}): the records do "
+                f"not resolve {names}, which the global model needs between the wells "
+                f"({NAMES[k]}: {worst.t:.2g} standard errors, ±{100 * worst.se_h * self.distance ** k / 2 ** k / max(abs(self.terms[1].coef) * self.distance / 2, 1e-300):.2g} % "
+                f"of the force scale over half the interwell distance); to resolve it " + "; ".join(parts))
+
+
+@dataclass(frozen=True)
+class ResolutionReport:
+    """Per DOF (cell) and well, which local Taylor terms the data resolve, which the global
+    model needs, and the excitation that would resolve the missing ones (module docstring of
+    `gmr_jax._reconstruct._resolution`). `print(report)` gives a Markdown table and the advice.
+
+    **Attributes:** `wells`: a list of `WellResolution`.
+    """
+
+    wells: list
+
+    def missing(self) -> list:
+        return [(w, t) for w in self.wells for t in w.missing()]
+
+    def advice(self) -> list[str]:
+        return [a for w in self.wells if (a := w.advice())]
+
+    def unresolved_everywhere(self) -> dict[int, list[str]]:
+        """Per DOF, the orders some well needs and no well of that DOF resolves."""
+        out = {}
+        for d in sorted({w.dof for w in self.wells}):
+            ws = [w for w in self.wells if w.dof == d]
+            ks = [k for k in ORDERS if any(t.order == k and t.needed for w in ws for t in w.terms)
+                  and not any(t.order == k and t.resolved for w in ws for t in w.terms)]
+            if ks:
+                out[d] = [NAMES[k] for k in ks]
+        return out
+
+    def warnings(self) -> list[str]:
+        """The advice of every well with a needed order unresolved (emitted as `GMRDataWarning`)."""
+        return self.advice()
+
+    def table(self) -> str:
+        head = ("| DOF | well x | amplitude (% of distance) | band (Hz) | f_n (Hz) | "
+                + " | ".join(f"{n} (t / bound)" for n in NAMES) + " | missing | advised amplitude |")
+        lines = [head, "|" + "---|" * (head.count("|") - 1)]
+        for w in self.wells:
+            cells = []
+            for t in w.terms:
+                mark = "ok" if t.resolved else ("**NO**" if t.needed else "no")
+                bound = t.se_h * w.distance ** t.order / 2 ** t.order / max(abs(w.terms[1].coef) * w.distance / 2, 1e-300)
+                cells.append(f"{mark} {t.t:.3g} / {100 * bound:.2g} %" + ("" if t.needed else " (not needed)"))
+            miss = w.missing()
+            adv = max((t.advised_ratio for t in miss if t.advised_ratio is not None), default=None)
+            lines.append(f"| {w.dof} | {w.equilibrium:.5g} | {100 * w.ratio:.3g} | {w.band[0]:.3g}-{w.band[1]:.3g} | "
+                         f"{w.f_natural:.3g} | " + " | ".join(cells) + f" | {', '.join(NAMES[t.order] for t in miss) or '-'}"
+                         f" | {'-' if not miss else ('> %.2g %%' % (100 * MAX_ADVISED_RATIO) if adv is None or adv > MAX_ADVISED_RATIO else '%.2g %%' % (100 * adv))} |")
+        return "\n".join(lines)
+
+    def __str__(self) -> str:
+        adv = self.advice()
+        legend = ("t: |coefficient| / standard error of the local fit (0: dropped); bound: noise-limited standard "
+                  f"error of the term over half the interwell distance, % of the force scale k_1 h; ok = t >= "
+                  f"{T_RESOLVED:g} or bound <= {100 * BOUND_FRACTION:g} %; **NO** = needed and unresolved.")
+        nowhere = self.unresolved_everywhere()
+        lines = [self.table(), "", legend]
+        if nowhere:
+            lines += ["", "Needed by the global model and resolved at no well: "
+                      + "; ".join(f"DOF {d}: {', '.join(n)}" for d, n in nowhere.items())]
+        return "\n".join(lines + (["", "Advice:"] + [f"- {a}" for a in adv] if adv else []))
+
+    def to_dict(self) -> list[dict]:
+        """Plain-JSON form (the model file's "resolution" key)."""
+        out = []
+        for w in self.wells:
+            d = asdict(w)
+            d["band"] = list(w.band)
+            d["terms"] = [asdict(t) | {"name": NAMES[t.order], "resolved": t.resolved} for t in w.terms]
+            d["advice"] = w.advice()
+            out.append(_plain(d))
+        return out
+
+
+def _plain(obj):
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, (np.floating, float)):
+        return float(obj) if np.isfinite(obj) else None
+    if isinstance(obj, (np.integer, np.bool_)):
+        return obj.item()
+    return obj
+
+
+def _band(q: np.ndarray, dt: float) -> tuple[float, float]:
+    """Frequencies (Hz) between which 5-95 % of the power of q (mean removed) lies."""
+    q = np.asarray(q, float) - np.mean(q)
+    p = np.abs(np.fft.rfft(q)) ** 2
+    f = np.fft.rfftfreq(q.size, dt)
+    c = np.cumsum(p[1:]) / max(np.sum(p[1:]), 1e-300)
+    return float(f[1:][np.searchsorted(c, 0.05)]), float(f[1:][min(np.searchsorted(c, 0.95), c.size - 1)])
+
+
+def _hierarchical(q, v, y, damping_cols, k):
+    """OLS of y on 1, q, ..., q^k and the given damping columns: (coef_k, se_k, g_k)."""
+    cols = [q**j for j in range(k + 1)] + damping_cols
+    theta = np.stack(cols, axis=1)
+    scale = np.linalg.norm(theta, axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    ts = theta / scale
+    coef, *_ = np.linalg.lstsq(ts, y, rcond=None)
+    resid = y - ts @ coef
+    dof = max(q.size - theta.shape[1], 1)
+    s2 = float(resid @ resid) / dof
+    inv = np.linalg.pinv(ts.T @ ts)
+    se = np.sqrt(max(s2 * inv[k, k], 0.0)) / scale[k]
+    col = theta[:, k]
+    ss = float(np.sum((col - col.mean()) ** 2))
+    vif = inv[k, k] * ss / scale[k] ** 2 if k > 0 and ss > 0 else 1.0
+    return float(coef[k] / scale[k]), float(se), float(1.0 / np.sqrt(max(vif, 1.0)))
+
+
+def _damping_columns(q, v, library, support):
+    out = []
+    for (phys, j), s in zip(library.terms(), support):
+        if not s or phys == STIFFNESS:
+            continue
+        if phys == VELOCITY_DAMPING:
+            out.append(np.sign(v) * np.abs(v) ** j if j != 1 else v)
+        elif phys == POSITION_DAMPING:
+            out.append(q**j * v)
+    return out
+
+
+def _taylor(stiffness: np.ndarray, x0: float, k: int) -> float:
+    """F^(k)(x0) / k! of the ascending polynomial `stiffness`."""
+    p = np.polynomial.Polynomial(np.asarray(stiffness, float))
+    return float(p.deriv(k)(x0) / np.prod(np.arange(1, k + 1))) if k <= p.degree() else 0.0
+
+
+def resolution_report(recs, targets, groups, reports, model, library, masses, topology) -> ResolutionReport:
+    """The `ResolutionReport` of a reconstruction: `recs` (completed recordings), `targets`
+    (per recording, the (N, D) force each DOF carries), `groups` (per DOF, per well, the
+    recording indices), `reports` (per DOF, the `DofReport`), `model` (the `GlobalModel`),
+    `library`, `masses`, `topology` (its `carried` sums the masses a chain cell carries)."""
+    terms = library.terms()
+    idx = {k: terms.index((STIFFNESS, k)) for k in ORDERS if (STIFFNESS, k) in terms}
+    carried = np.asarray(topology.carried(np.asarray(masses, float)[None, :]))[0]
+    wells = []
+    for i, (grp, rep) in enumerate(zip(groups, reports)):
+        eq = np.asarray(rep.equilibria, float)
+        stiff = np.asarray(model.stiffness[i])
+        for w, g in enumerate(grp):
+            x0 = float(eq[w])
+            others = np.delete(eq, w)
+            dist = float(np.min(np.abs(others - x0))) if others.size else 0.0
+            h = 0.5 * dist
+            q = np.concatenate([recs[k].x[:, i] for k in g]) - x0
+            v = np.concatenate([recs[k].v[:, i] for k in g])
+            y = np.concatenate([targets[k][:, i] for k in g])
+            amp = max(float(np.percentile(np.abs(recs[k].x[:, i] - recs[k].x[:, i].mean()), 99.9)) for k in g)
+            coef, se = np.asarray(rep.local_coef[w], float), np.asarray(rep.local_stderr[w], float)
+            k1 = abs(coef[idx[1]]) if 1 in idx else 0.0
+            f_n = float(np.sqrt(k1 / carried[i]) / (2 * np.pi)) if carried[i] > 0 else float("nan")
+            band = _band(recs[g[0]].x[:, i], recs[g[0]].dt)
+            damp = _damping_columns(q, v, library, coef != 0)
+            scale = k1 * h
+            rows = []
+            for k in ORDERS:
+                if k not in idx:
+                    continue
+                c, s = float(coef[idx[k]]), float(se[idx[k]])
+                _, se_h, gk = _hierarchical(q, v, y, damp, k)
+                se_h = max(se_h, s)  # a kept term: the local fit's own (larger-library) standard error
+                a_g = _taylor(stiff, x0, k)
+                significant = c != 0 and s > 0 and abs(c) >= T_RESOLVED * s
+                bounded = scale > 0 and se_h * h**k <= BOUND_FRACTION * scale
+                needed = k <= NEEDED_ORDER
+                useful = needed or (scale > 0 and abs(a_g) * h**k >= BOUND_FRACTION * scale)
+                rho, ratio = 1.0, None
+                if useful and not bounded and k >= 2 and scale > 0:
+                    rho = max(se_h * h ** (k - 1) / (BOUND_FRACTION * k1), 1.0)
+                    ratio = amp / dist * rho ** (1.0 / (k - 1)) if dist > 0 else None
+                rows.append(TermResolution(order=k, coef=c, se=s, se_h=se_h, global_coef=a_g, g=gk,
+                                           significant=bool(significant), bounded=bool(bounded),
+                                           needed=bool(needed), rho=float(rho), advised_ratio=ratio))
+            wells.append(WellResolution(dof=i, well=w, equilibrium=x0, recordings=[recs[k].name for k in g],
+                                        amplitude=amp, distance=dist, f_natural=f_n, band=band,
+                                        n_samples=int(q.size), terms=rows))
+    return ResolutionReport(wells=wells)
+
+
+def format_resolution(entries: list[dict]) -> list[str]:
+    """Lines `gmr show` prints for a model file's "resolution" key (`ResolutionReport.to_dict`)."""
+    out = []
+    for w in entries:
+        try:
+            terms = " ".join(f"{t['name']} {'ok' if t['resolved'] else ('NO' if t['needed'] else 'no')}"
+                             for t in w["terms"])
+            ratio = w["amplitude"] / w["distance"] if w.get("distance") else float("nan")
+            out.append(f"  DOF {w['dof']}, well x = {w['equilibrium']:.5g}: amplitude {100 * ratio:.3g} % of the "
+                       f"interwell distance; {terms}")
+            if w.get("advice"):
+                out.append(f"    advice: {w['advice']}")
+        except (KeyError, TypeError, ZeroDivisionError):
+            out.append(f"  (unreadable entry: {str(w)[:80]})")
+    return out
