@@ -60,6 +60,7 @@ from ._reconstruct._reconstruct import (
     reconstruct as reconstruct,
     regression_targets as regression_targets,
 )
+from ._reconstruct._resolution import ResolutionReport as ResolutionReport
 
 # simulation
 from ._simulate._frequency import resonance_peaks as resonance_peaks, transmissibility as transmissibility

@@ -16,7 +16,8 @@ import numpy as np
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, term_name
 
 #: keys `show` prints in their own sections; any other key is listed at the end.
-_KNOWN = ("format", "topology", "masses", "terms", "method", "library", "training", "warnings", "data_range")
+_KNOWN = ("format", "topology", "masses", "terms", "method", "library", "training", "warnings", "data_range",
+          "resolution")
 
 
 def register(sub):
@@ -168,6 +169,12 @@ def _describe(model, d: dict, name: str, p: int) -> str:
                 out.append(f"  {rec}: " + "; ".join(parts).replace("r2", "R^2").replace("nrmse", "NRMSE"))
     elif rng is None:
         out.append("  not recorded in this file")
+    res = d.get("resolution")
+    if isinstance(res, list) and res:
+        from .._reconstruct._resolution import format_resolution
+
+        out += ["", "What each well's data resolved (F, F', F'' needed at every well; NO = needed, unresolved):"]
+        out += format_resolution(res)
     warns = d.get("warnings") or []
     out += ["", f"Warnings stored with the model: {len(warns) or 'none'}"]
     out += [f"  - {w}" for w in warns]

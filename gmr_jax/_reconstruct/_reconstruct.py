@@ -19,7 +19,7 @@ from .._model._model import GlobalModel
 from .._recordings._recording import Recording, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
-from . import _sanity
+from . import _resolution, _sanity
 from ._sanity import GMRDataWarning
 
 #: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
@@ -551,8 +551,13 @@ def reconstruct(
     model = _model_from_blocks(masses, topology, stiff, vdamp, pdamp, stderr)
     training = training_scores(model, recs, masses, topology)
     warnings += _sanity.check_fit_quality(training)
+    resolution = _resolution.resolution_report(recs, targets, [wl[2] for wl in wells], reports, model, library,
+                                               masses, topology)  # what each well resolved, excitation advice
+    warnings += resolution.warnings()
     _emit(warnings)
-    return _solution(model, failure, "GMR", library, reports, training, warnings)
+    sol = _solution(model, failure, "GMR", library, reports, training, warnings)
+    sol.stats["resolution"] = resolution
+    return sol
 
 
 def coefficients_to_blocks(coef: np.ndarray, library: Library):

@@ -30,8 +30,10 @@ with a fixed noise floor se_k ~ A^-k (then less amplitude is needed than advised
 becomes resolved when se_k falls by the factor rho = min(se_k h^(k-1) / (0.01 k_1),
 3 se_k / |a_k^G|) (bounded, or significant at the global model's own value), i.e. at the
 amplitude A rho^(1/(k-1)), or with rho^2 times the samples, or 20 log10(rho) dB more SNR;
-when the record is narrow-band (g_k below 0.8 of the broadband value) a sweep over about
-0.5-2 x the well's natural frequency gains (g_broad / g_k). The advice is checked by
+when the record is nearly sinusoidal (g_k below 0.8 of the broadband value) a sweep over
+about 0.5-2 x the well's natural frequency gains (g_broad / g_k). The advised amplitude aims
+`SAFETY` (1.25) times below the threshold: the scaling is approximate (noise on x, and a
+response spectrum that changes with amplitude, e.g. under cubic damping). The advice is checked by
 simulation in `studies/stress_cases.py` (refit at the advised amplitude).
 
 **Warning.** Every well with a needed order unresolved is reported as a `GMRDataWarning`
@@ -40,16 +42,24 @@ per DOF, the needed orders that no well resolved.
 """
 
 from dataclasses import asdict, dataclass, field
+from typing import ClassVar
+from math import comb
 
 import numpy as np
 
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING
 
-#: |coefficient| / standard error at which a kept local term counts as resolved (the default screen).
+#: |coefficient| / standard error at which a kept local term counts as significant (the default screen).
 T_RESOLVED = 3.0
-#: A term is bounded (resolved as negligible) when se_k h^k <= this share of k_1 h, and needed
-#: (F''' only; F, F', F'' always) when the global model's a_k h^k exceeds it.
-BOUND_FRACTION = 0.01
+#: A term is resolved when two of its noise-limited standard errors move the global restoring
+#: force by at most this share of its RMS over the span (`_sanity.MAX_RESTORING_UNCERTAINTY`,
+#: rule 11's 2 %); F''' is advised on (not needed) when the global model's own a_3 moves it by more.
+BOUND_FRACTION = 0.02
+#: The advice aims this factor below the threshold (the scaling is approximate: x noise, the
+#: spectrum changing with amplitude).
+SAFETY = 1.25
+#: The span: the wells' range widened by this share of it on either side (the built-in boxes: 0.25).
+BOX_MARGIN = 0.25
 #: The orders every well must resolve: F, F', F'' (the curvature oracle's data).
 NEEDED_ORDER = 2
 #: Orders reported: F, F', F'', F'''.
@@ -79,12 +89,18 @@ class TermResolution:
     significant: bool
     bounded: bool
     needed: bool
+    impact: float = 0.0
+    share: float = 0.0
     rho: float = 1.0
     advised_ratio: float | None = None
 
     @property
     def resolved(self) -> bool:
         return self.bounded
+
+    @property
+    def name(self) -> str:
+        return NAMES[self.order]
 
     @property
     def t(self) -> float:
@@ -123,7 +139,6 @@ class WellResolution:
         names = ", ".join(NAMES[t.order] for t in miss)
         worst = max(miss, key=lambda t: t.advised_ratio if t.advised_ratio is not None else np.inf)
         k, rho = worst.order, worst.rho
-        narrow = (self.band[1] - self.band[0]) < 0.5 * self.f_natural
         parts = []
         if worst.advised_ratio is not None and worst.advised_ratio <= MAX_ADVISED_RATIO:
             parts.append(f"excite it to about {100 * worst.advised_ratio:.2g} % of the interwell distance "
@@ -134,14 +149,15 @@ class WellResolution:
                          f"{100 * (worst.advised_ratio or MAX_ADVISED_RATIO):.2g} % of the interwell distance)")
         parts.append(f"or record {rho**2:.2g} x as many samples, or {20 * np.log10(rho):.2g} dB more SNR")
         gb = G_BROADBAND.get(k, G_BROADBAND[3])
-        if narrow or worst.g < 0.8 * gb:
-            parts.append(f"the record is narrow-band ({self.band[0]:.3g}-{self.band[1]:.3g} Hz, g_{k} = {worst.g:.2f}); "
+        if worst.g < 0.8 * gb:
+            parts.append(f"the record is nearly sinusoidal (its q^{k} is {100 * (1 - worst.g ** 2):.0f} % collinear with "
+                         f"the lower orders, g_{k} = {worst.g:.2f}; band {self.band[0]:.3g}-{self.band[1]:.3g} Hz); "
                          f"a sweep over about {0.5 * self.f_natural:.3g}-{2 * self.f_natural:.3g} Hz "
                          f"(0.5-2 x f_n) would raise g_{k} towards {gb:.2f}")
         return (f"DOF {self.dof}, well at x = {self.equilibrium:.5g} ({', '.join(self.recordings)}): the records do "
                 f"not resolve {names}, which the global model needs between the wells "
-                f"({NAMES[k]}: {worst.t:.2g} standard errors, ±{100 * worst.se_h * self.distance ** k / 2 ** k / max(abs(self.terms[1].coef) * self.distance / 2, 1e-300):.2g} % "
-                f"of the force scale over half the interwell distance); to resolve it " + "; ".join(parts))
+                f"({NAMES[k]}: {worst.t:.2g} standard errors; its noise moves the global force by ±{100 * worst.impact:.2g} % "
+                f"RMS (2 sd) over the span, above {100 * BOUND_FRACTION:g} %); to resolve it " + "; ".join(parts))
 
 
 @dataclass(frozen=True)
@@ -154,6 +170,9 @@ class ResolutionReport:
     """
 
     wells: list
+    #: the resolution threshold (`BOUND_FRACTION`) and the orders every well must resolve
+    bound: ClassVar[float] = BOUND_FRACTION
+    needed_order: ClassVar[int] = NEEDED_ORDER
 
     def missing(self) -> list:
         return [(w, t) for w in self.wells for t in w.missing()]
@@ -184,8 +203,7 @@ class ResolutionReport:
             cells = []
             for t in w.terms:
                 mark = "ok" if t.resolved else ("**NO**" if t.needed else "no")
-                bound = t.se_h * w.distance ** t.order / 2 ** t.order / max(abs(w.terms[1].coef) * w.distance / 2, 1e-300)
-                cells.append(f"{mark} {t.t:.3g} / {100 * bound:.2g} %" + ("" if t.needed else " (not needed)"))
+                cells.append(f"{mark} {t.t:.3g} / {100 * t.impact:.2g} %" + ("" if t.needed else " (not needed)"))
             miss = w.missing()
             adv = max((t.advised_ratio for t in miss if t.advised_ratio is not None), default=None)
             lines.append(f"| {w.dof} | {w.equilibrium:.5g} | {100 * w.ratio:.3g} | {w.band[0]:.3g}-{w.band[1]:.3g} | "
@@ -195,9 +213,10 @@ class ResolutionReport:
 
     def __str__(self) -> str:
         adv = self.advice()
-        legend = ("t: |coefficient| / standard error of the local fit (0: dropped); bound: noise-limited standard "
-                  f"error of the term over half the interwell distance, % of the force scale k_1 h; ok = t >= "
-                  f"{T_RESOLVED:g} or bound <= {100 * BOUND_FRACTION:g} %; **NO** = needed and unresolved.")
+        legend = ("t: |coefficient| / standard error of the local fit (0: dropped); bound: how far two noise-limited "
+                  "standard errors of the term move the global restoring force (RMS over the wells' span widened by "
+                  f"{100 * BOX_MARGIN:g} % either side), % of its RMS; ok = bound <= {100 * BOUND_FRACTION:g} %; "
+                  "**NO** = needed (F, F', F'') and unresolved.")
         nowhere = self.unresolved_everywhere()
         lines = [self.table(), "", legend]
         if nowhere:
@@ -269,6 +288,32 @@ def _damping_columns(q, v, library, support):
     return out
 
 
+def hermite_influence(nodes, order: int, lo: float, hi: float, n: int = 201) -> np.ndarray:
+    """(wells, order + 1): RMS over [lo, hi] of the cardinal Hermite polynomials of the nodes
+    with orders 0..`order` at each: H_ik has Taylor coefficient 1 of order k at node i and 0 for
+    every other (node, order); a change da of the local coefficient a_ik moves the interpolated
+    global force by da H_ik(x) (the coordination is linear in the local coefficients)."""
+    nodes = np.asarray(nodes, float)
+    c, hs = 0.5 * (nodes.max() + nodes.min()), max(0.5 * float(np.ptp(nodes)), 1e-300)
+    u = (nodes - c) / hs
+    m = nodes.size * (order + 1)
+    p = np.arange(m)
+    rows = []
+    for ul in u:
+        for j in range(order + 1):
+            coef = np.array([comb(int(q), j) for q in p], float)
+            rows.append(coef * np.where(p >= j, ul ** np.maximum(p - j, 0), 0.0))
+    vand = np.array(rows)
+    grid = np.polynomial.polynomial.polyvander((np.linspace(lo, hi, n) - c) / hs, m - 1)
+    out = np.zeros((nodes.size, order + 1))
+    for i in range(nodes.size):
+        for k in range(order + 1):
+            rhs = np.zeros(m)
+            rhs[i * (order + 1) + k] = hs**k
+            out[i, k] = float(np.sqrt(np.mean((grid @ np.linalg.solve(vand, rhs)) ** 2)))
+    return out
+
+
 def _taylor(stiffness: np.ndarray, x0: float, k: int) -> float:
     """F^(k)(x0) / k! of the ascending polynomial `stiffness`."""
     p = np.polynomial.Polynomial(np.asarray(stiffness, float))
@@ -287,11 +332,15 @@ def resolution_report(recs, targets, groups, reports, model, library, masses, to
     for i, (grp, rep) in enumerate(zip(groups, reports)):
         eq = np.asarray(rep.equilibria, float)
         stiff = np.asarray(model.stiffness[i])
+        lo, hi = eq.min() - BOX_MARGIN * np.ptp(eq), eq.max() + BOX_MARGIN * np.ptp(eq)
+        f_rms = float(np.sqrt(np.mean(np.polynomial.polynomial.polyval(np.linspace(lo, hi, 201), stiff) ** 2)))
+        # order k <= 2 as the curvature oracle uses it (orders 0..2 at every well), F''' with orders 0..3
+        influence = {k: (hermite_influence(eq, max(k, NEEDED_ORDER), lo, hi)[:, k] if eq.size > 1
+                         else np.zeros(eq.size)) for k in ORDERS}
         for w, g in enumerate(grp):
             x0 = float(eq[w])
             others = np.delete(eq, w)
             dist = float(np.min(np.abs(others - x0))) if others.size else 0.0
-            h = 0.5 * dist
             q = np.concatenate([recs[k].x[:, i] for k in g]) - x0
             v = np.concatenate([recs[k].v[:, i] for k in g])
             y = np.concatenate([targets[k][:, i] for k in g])
@@ -301,7 +350,6 @@ def resolution_report(recs, targets, groups, reports, model, library, masses, to
             f_n = float(np.sqrt(k1 / carried[i]) / (2 * np.pi)) if carried[i] > 0 else float("nan")
             band = _band(recs[g[0]].x[:, i], recs[g[0]].dt)
             damp = _damping_columns(q, v, library, coef != 0)
-            scale = k1 * h
             rows = []
             for k in ORDERS:
                 if k not in idx:
@@ -311,16 +359,19 @@ def resolution_report(recs, targets, groups, reports, model, library, masses, to
                 se_h = max(se_h, s)  # a kept term: the local fit's own (larger-library) standard error
                 a_g = _taylor(stiff, x0, k)
                 significant = c != 0 and s > 0 and abs(c) >= T_RESOLVED * s
-                bounded = scale > 0 and se_h * h**k <= BOUND_FRACTION * scale
+                impact = 2.0 * se_h * influence[k][w] / f_rms if f_rms > 0 else np.inf
+                share = abs(a_g) * influence[k][w] / f_rms if f_rms > 0 else 0.0
+                bounded = bool(impact <= BOUND_FRACTION)
                 needed = k <= NEEDED_ORDER
-                useful = needed or (scale > 0 and abs(a_g) * h**k >= BOUND_FRACTION * scale)
+                useful = needed or share >= BOUND_FRACTION
                 rho, ratio = 1.0, None
-                if useful and not bounded and k >= 2 and scale > 0:
-                    rho = max(se_h * h ** (k - 1) / (BOUND_FRACTION * k1), 1.0)
+                if useful and not bounded and k >= 2 and np.isfinite(impact):
+                    rho = max(SAFETY * impact / BOUND_FRACTION, 1.0)
                     ratio = amp / dist * rho ** (1.0 / (k - 1)) if dist > 0 else None
                 rows.append(TermResolution(order=k, coef=c, se=s, se_h=se_h, global_coef=a_g, g=gk,
-                                           significant=bool(significant), bounded=bool(bounded),
-                                           needed=bool(needed), rho=float(rho), advised_ratio=ratio))
+                                           significant=bool(significant), bounded=bounded, needed=bool(needed),
+                                           impact=float(impact), share=float(share), rho=float(rho),
+                                           advised_ratio=ratio))
             wells.append(WellResolution(dof=i, well=w, equilibrium=x0, recordings=[recs[k].name for k in g],
                                         amplitude=amp, distance=dist, f_natural=f_n, band=band,
                                         n_samples=int(q.size), terms=rows))
