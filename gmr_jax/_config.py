@@ -68,7 +68,9 @@ def use_compilation_cache(path: str | None = None, *, min_compile_time: float = 
     `min_compile_time` seconds to compile are not stored. The command line calls this at start;
     in a notebook, call it once after `import gmr_jax`. Returns the folder in use (None: off).
     Entries are keyed by the program, the JAX version and the device, so a stale entry is never
-    used; delete the folder to reclaim the space.
+    used; delete the folder to reclaim the space. The traced programs of `fit_local` and
+    `coordinate` are kept there too (subfolder `gmr_traces`, keyed also by a hash of gmr_jax's
+    source), which spares a new process their tracing.
     """
     import os
 
@@ -82,4 +84,7 @@ def use_compilation_cache(path: str | None = None, *, min_compile_time: float = 
     jax.config.update("jax_compilation_cache_dir", path)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_time))
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    from ._trace_cache import set_folder
+
+    set_folder(path)  # and the traced programs of the fits (gmr_jax._trace_cache)
     return path

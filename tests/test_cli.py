@@ -37,6 +37,19 @@ def test_fit_hand_made_csv(joint_files, tmp_path, capsys):
     np.testing.assert_allclose([k[1], k[3]], [-2244, 1755], rtol=0.03)
     printed = capsys.readouterr().out
     assert "estimated from x" in printed and "F_0(x, v)" in printed
+    # the stored standard errors are printed, term by term, and agree with the file
+    assert "std. error" in printed
+    x3 = next(t for t in json.loads(out.read_text())["terms"] if t["physics"] == "stiffness" and t["order"] == 3)
+    row = next(line for line in printed.splitlines() if line.split()[:2] == ["x^3", "stiffness"])
+    assert float(row.split()[3]) == pytest.approx(x3["stderr"], rel=1e-2)
+    # the figure: PNG and PDF beside the model, a real image (restoring, damping, residual panels)
+    png, pdf = tmp_path / "model_fit.png", tmp_path / "model_fit.pdf"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and pdf.read_bytes()[:5] == b"%PDF-"
+    assert str(png) in printed
+    import matplotlib.image
+
+    img = matplotlib.image.imread(png)
+    assert img.shape[0] > 200 and img.shape[1] > 1000 and np.std(img[..., :3]) > 0.05
     written = json.loads(out.read_text())
     assert written["format"] == "gmr-model/1"
     # the region the model was fitted on, per DOF (where basins/actuate look for wells)
@@ -82,6 +95,8 @@ def test_bad_inputs_one_line_exit_2(joint_files, tmp_path, capsys):
         assert rc == 2, err
         assert msg in err and "Traceback" not in err
         assert len(err.strip().splitlines()) == 1
+    rc, err = _main(["fit", *joint_files, "--out", str(tmp_path / "m.json"), "--figure", "fit.jpg"], capsys)
+    assert rc == 2 and "--figure must name a .png" in err and not (tmp_path / "m.json").exists()
     rc, err = _main(["fit", joint_files[0], "--out", str(tmp_path / "m.json")], capsys)
     assert rc == 2 and "at least two distinct equilibria" in err and "Traceback" not in err
     rc, err = _main(["fit", joint_files[0], joint_files[0], "--out", str(tmp_path / "m.json")], capsys)

@@ -7,6 +7,7 @@ recorded in the model file under "warnings", and the exit status stays 0 (3 with
 
 import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -14,6 +15,7 @@ from .._errors import GMRInputError
 from .._reconstruct._sanity import GMRDataWarning
 from ._args import add_columns_option, load_recordings, positive_int
 from ._progress import stage
+from ._show import _term_table
 
 
 def register(sub):
@@ -35,6 +37,10 @@ def register(sub):
     f.add_argument("--masses", default=None, help="comma-separated masses (default: from recordings, else 1)")
     f.add_argument("--no-velocity-damping", action="store_true")
     f.add_argument("--no-position-damping", action="store_true")
+    f.add_argument("--figure", default=None, metavar="PNG",
+                   help="figure of the fitted restoring and damping forces over the data ranges, and the "
+                   "residuals (PNG, with a PDF beside it; default: OUT's name with _fit.png)")
+    f.add_argument("--no-figure", action="store_true", help="write no figure (saves ~1 s: matplotlib)")
     f.add_argument("--strict", action="store_true",
                    help="exit with status 3 when a sanity check warns about the data or the model (the model and "
                    "its warnings are still written); without it warnings are printed and the status is 0")
@@ -49,9 +55,21 @@ def data_range(recs):
     return [[float(x[:, i].min()), float(x[:, i].max())] for i in range(x.shape[1])]
 
 
+def figure_path(out: str, figure: str | None) -> Path:
+    """Where `gmr fit` writes its figure: `--figure`, else OUT with its suffix replaced by _fit.png."""
+    if figure is not None:
+        p = Path(figure)
+        if p.suffix.lower() != ".png":
+            raise GMRInputError(f"--figure must name a .png file (a .pdf is written beside it), got {figure!r}")
+        return p
+    o = Path(out)
+    return o.with_name(o.stem + "_fit.png")
+
+
 def run(args) -> int:
     import gmr_jax as gmr
 
+    png = None if args.no_figure else figure_path(args.out, args.figure)  # a bad name fails before the fit
     stage(f"loading {len(args.recordings)} recording(s)")
     recs, load_warnings = load_recordings(args.recordings, args.columns)
     lib = gmr.Library(args.restoring_order, args.damping_order,
@@ -85,8 +103,8 @@ def run(args) -> int:
                    library={"r": lib.restoring_order, "d": lib.damping_order}, training=st["training"],
                    warnings=load_warnings + list(st["warnings"]), data_range=data_range(recs))
     print(f"{st['method']} model from {len(recs)} recording(s) -> {args.out}")
-    for line in model.equations():
-        print("  " + line)
+    for line in _term_table(model, {"terms": model.terms()}, 4):  # equations, coefficients, std. errors
+        print(line)
     for i, rep in enumerate(st["dofs"]):
         if rep.equilibria.size:
             print(f"  DOF {i}: equilibria {np.round(rep.equilibria, 6).tolist()}, global orders "
@@ -95,6 +113,15 @@ def run(args) -> int:
         print(f"  training {name}: R2 {np.round(sc['r2'], 5).tolist()}, NRMSE {np.round(sc['nrmse'], 5).tolist()}")
     if any(r.v is None or r.a is None for r in recs):
         print("  note: velocities/accelerations were estimated from x (Savitzky-Golay, see README)")
+    if png is not None:
+        stage(f"writing the figure {png} (and .pdf)")
+        from ..plots._fit import fit_figure
+
+        fig = fit_figure(model, recs, title=f"{st['method']} model ({Path(args.out).name}) against its recordings")
+        fig.savefig(png, dpi=110)
+        fig.savefig(png.with_suffix(".pdf"))
+        print(f"  figure: {png} (and {png.with_suffix('.pdf').name}): restoring and damping forces over the "
+              f"data ranges, residuals")
     for w in st["warnings"]:
         print(f"warning: {w}", file=sys.stderr)
     n_warn = len(load_warnings) + len(st["warnings"])

@@ -8,6 +8,7 @@ from jaxtyping import Array, Float, Int
 from .._solution import RESULTS, Solution, error_if_failed
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, Library
 from .._fit._local_fit import LocalFit
+from .._trace_cache import disk_traced
 from ._gls import hermite_gls
 from ._hermite import hermite_interpolate, highest_order
 
@@ -78,7 +79,7 @@ def _global_from_local(equilibria, coef, cov, library: Library, method: str, alp
     return g, (k_r, k_d, cond_r, cond_d, r_i, d_i, extra)
 
 
-@eqx.filter_jit
+@disk_traced  # eqx.filter_jit, its traced program kept on disk by the CLI
 def coordinate(
     fits: LocalFit,
     library: Library = Library(),

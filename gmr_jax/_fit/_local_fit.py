@@ -6,6 +6,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from .._solution import RESULTS, Solution, error_if_failed
+from .._trace_cache import disk_traced
 from ._library import Library
 from ._stls import STLS, compress, coefficient_covariance, stls_qr
 from ._threshold import default_thresholds, select_threshold
@@ -33,7 +34,7 @@ class LocalFit(eqx.Module):
     n_samples: Float[Array, ""]
 
 
-@eqx.filter_jit
+@disk_traced  # eqx.filter_jit, its traced program kept on disk by the CLI
 def fit_local(
     x: Float[Array, " samples"],
     v: Float[Array, " samples"],

@@ -5,4 +5,5 @@ figure, which a notebook displays."""
 from ._basins import basin_figure as basin_figure, config_label as config_label
 from ._discovery import discovery_figures as discovery_figures
 from ._figures import case_figure as case_figure
+from ._fit import fit_figure as fit_figure
 from ._free_run import free_run_figure as free_run_figure

@@ -1,0 +1,117 @@
+"""Wall time of `gmr fit` from the shell, cold and warm, next to a plain pysindy script (issue 16).
+
+Two recordings of the bistable joint (paper case, 5 deg, 60 dB, 8001 samples each, NPZ) are
+written to a temporary folder; then, each in a fresh process:
+
+- `gmr fit` cold: an empty cache folder (`GMR_CACHE_DIR`), everything traced and compiled;
+- `gmr fit` warm: the same command again (`--reps` times; median), compiled programs and traced
+  fits loaded from the cache;
+- `python -c "import gmr_jax"`: the import alone;
+- a pysindy script: load both files, fit a SINDy model (PolynomialLibrary degree 5 on (x, v),
+  STLSQ) to each, print the equations: what a pysindy user would write for the local fits.
+
+    python benchmarks/bench_fit_cli.py [--reps 3] [--out results/bench_fit_cli.md]
+
+The machine's load average is recorded with the times: on a shared machine they are an upper
+bound of what a quiet one gives.
+"""
+
+import argparse
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+PYSINDY_SCRIPT = """
+import sys, time
+t0 = time.perf_counter()
+import numpy as np
+import pysindy as ps
+t1 = time.perf_counter()
+for path in sys.argv[1:]:
+    d = np.load(path)
+    X = np.column_stack([d["x"][:, 0], d["v"][:, 0]])
+    Xd = np.column_stack([d["v"][:, 0], d["a"][:, 0] - d["base_acc"][:, 0] if "base_acc" in d else d["a"][:, 0]])
+    m = ps.SINDy(feature_library=ps.PolynomialLibrary(degree=5), optimizer=ps.STLSQ(threshold=0.05))
+    m.fit(X, t=float(d["t"][1] - d["t"][0]), x_dot=Xd)
+    m.print()
+print(f"pysindy import {t1 - t0:.3f} s, fits {time.perf_counter() - t1:.3f} s", file=sys.stderr)
+"""
+
+
+def gmr_command() -> list[str]:
+    exe = Path(sys.executable).with_name("gmr")
+    return [str(exe)] if exe.exists() else [sys.executable, "-m", "gmr_jax"]
+
+
+def timed(cmd, env) -> float:
+    t = time.perf_counter()
+    r = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    dt = time.perf_counter() - t
+    if r.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed ({r.returncode}):\n{r.stderr[-2000:]}")
+    return dt
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--reps", type=int, default=3, help="warm runs (median reported)")
+    p.add_argument("--out", default="results/bench_fit_cli.md")
+    args = p.parse_args()
+
+    import numpy as np
+
+    import gmr_jax as gmr
+
+    work = Path(tempfile.mkdtemp(prefix="gmr_bench_fit_"))
+    recs = gmr.systems.make_recordings(gmr.systems.bistable_joint(), float(np.deg2rad(5.0)), seed=0)
+    files = []
+    for i, r in enumerate(recs):
+        files.append(str(work / f"joint_S{i + 1}.npz"))
+        gmr.save_recording(r, files[-1])
+    n = recs[0].t.shape[0]
+    env = dict(os.environ, GMR_CACHE_DIR=str(work / "cache"), GMR_PROGRESS="0")
+    fit = gmr_command() + ["fit", *files, "--out", str(work / "model.json")]
+    load0 = os.getloadavg()[0]
+    rows = []
+    rows.append(("`gmr fit` cold (empty cache)", timed(fit, env)))
+    warm = [timed(fit, env) for _ in range(args.reps)]
+    rows.append((f"`gmr fit` warm (median of {args.reps})", statistics.median(warm)))
+    imp = [timed([sys.executable, "-c", "import gmr_jax"], env) for _ in range(args.reps)]
+    rows.append(("`import gmr_jax` alone", statistics.median(imp)))
+    ps_times = [timed([sys.executable, "-c", PYSINDY_SCRIPT, *files], env) for _ in range(args.reps)]
+    rows.append((f"pysindy script: import + 2 local fits (median of {args.reps})", statistics.median(ps_times)))
+    load1 = os.getloadavg()[0]
+    shutil.rmtree(work, ignore_errors=True)
+
+    warm_t, ps_t = rows[1][1], rows[3][1]
+    lines = [
+        "# `gmr fit` from the shell: cold and warm, next to a pysindy script",
+        "",
+        f"Command: `python benchmarks/bench_fit_cli.py --reps {args.reps}` ({os.cpu_count()} CPUs, load average "
+        f"{load0:.1f} at start, {load1:.1f} at end; each row a fresh process, wall time).",
+        "",
+        f"Data: two recordings of the bistable joint (5 deg, 60 dB, {n} samples each, NPZ). `gmr fit` runs "
+        "the default reconstruction (threshold by cross-validation, auto coordination, sanity checks) and "
+        "writes the model; the pysindy script fits PolynomialLibrary(5) on (x, v) with STLSQ(0.05) to each "
+        "file (the two local fits only: no coordination, no threshold search).",
+        "",
+        "| run | wall time (s) |",
+        "|---|---:|",
+        *[f"| {name} | {t:.2f} |" for name, t in rows],
+        "",
+        f"Warm `gmr fit` / pysindy script: {warm_t / ps_t:.2f}x. Warm runs: "
+        + ", ".join(f"{t:.2f}" for t in warm) + " s.",
+        "",
+    ]
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text("\n".join(lines))
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,125 @@
+"""The figure `gmr fit` writes: a fitted model against the recordings it was fitted on."""
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from .._reconstruct._reconstruct import regression_targets
+
+#: one colour per recording (well), reused in every panel
+COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
+
+
+def _signed_power(v, j: int, sign_eps: float):
+    """sgn(v)|v|^j (Eq. 7) in NumPy, as `gmr_jax._fit._library.signed_power`."""
+    s = np.sign(v) if sign_eps == 0.0 else np.tanh(v / sign_eps)
+    return s if j == 0 else s * np.abs(v) ** j
+
+
+def _forces(model, x, v):
+    """(restoring (n, dof), damping (n, dof)) at states (n, dof): NumPy for a `GlobalModel`
+    (no JAX dispatch in a figure), the model's own methods otherwise."""
+    x, v = np.atleast_2d(np.asarray(x, float)), np.atleast_2d(np.asarray(v, float))
+    if all(hasattr(model, k) for k in ("stiffness", "velocity_damping", "position_damping")):
+        P = np.polynomial.polynomial
+        k, b, c = (np.asarray(a, float) for a in (model.stiffness, model.velocity_damping, model.position_damping))
+        fr = np.stack([P.polyval(x[:, i], k[i]) for i in range(k.shape[0])], axis=1)
+        fd = np.stack([P.polyval(x[:, i], c[i]) * v[:, i]
+                       + sum(b[i, j] * _signed_power(v[:, i], j, model.sign_eps) for j in range(b.shape[1]))
+                       for i in range(k.shape[0])], axis=1)
+        return fr, fd
+    import jax
+
+    return (np.asarray(jax.vmap(model.restoring)(x)), np.asarray(jax.vmap(model.damping)(x, v)))
+
+
+def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "x", force_unit: str = "force",
+               band=None) -> Figure:
+    """The fitted model against its training recordings, one row per DOF (cell):
+
+    - restoring force F_r(x) over the data's span and a quarter of it beyond, with the
+      displacement range each recording covered shaded in its colour and the model's
+      equilibria (zeros of F_r) marked;
+    - damping force F_d(x_i, v) at each recording's mean displacement x_i, over 1.5x the
+      speeds it reached (recorded speed range shaded);
+    - residual: measured force carried by the DOF (the regression target, Eq. 8) minus the
+      model's F(x, v), against time, with its NRMSE per recording.
+
+    `recordings`: the `Recording`s the model was fitted on (v and a are estimated where
+    missing, as `reconstruct` does). `band`: optional callable `x (n,) -> (lower, upper)` of
+    shape (n, dof) drawn around F_r (an uncertainty band). Saved (PNG, or PDF by suffix) to
+    `path` when given; returns the matplotlib `Figure`."""
+    recs = [r.complete(model.topology) for r in recordings]
+    masses = np.asarray(model.masses, float)
+    d = model.n_dof
+    height = 3.0 * d + 0.7
+    fig = Figure(figsize=(13.5, height))  # fixed margins: a constrained layout doubles the time to save
+    fig.subplots_adjust(left=0.06, right=0.99, wspace=0.3, hspace=0.55, top=1 - 0.62 / height,
+                        bottom=0.5 / height)
+    axes = np.atleast_2d(fig.subplots(d, 3, squeeze=False))
+    for i in range(d):
+        ax_r, ax_d, ax_e = axes[i]
+        lo = min(float(np.min(r.x[:, i])) for r in recs)
+        hi = max(float(np.max(r.x[:, i])) for r in recs)
+        pad = 0.25 * max(hi - lo, 1e-12)
+        xs = np.linspace(lo - pad, hi + pad, 400)
+        X = np.zeros((xs.size, d))
+        X[:, i] = xs
+        fr = _forces(model, X, np.zeros_like(X))[0][:, i]
+        ax_r.plot(xs, fr, "k-", lw=1.8, label="model F_r")
+        if band is not None:
+            blo, bhi = (np.asarray(b)[:, i] for b in band(X))
+            ax_r.fill_between(xs, blo, bhi, color="0.6", alpha=0.4, lw=0, label="95 % band")
+        for k, r in enumerate(recs):
+            col = COLOURS[k % len(COLOURS)]
+            ax_r.axvspan(float(np.min(r.x[:, i])), float(np.max(r.x[:, i])), color=col, alpha=0.25, lw=0,
+                         label=f"{r.name}: data range")
+        sign = np.sign(fr)
+        for z in np.nonzero(sign[:-1] * sign[1:] < 0)[0]:
+            xz = xs[z] - fr[z] * (xs[z + 1] - xs[z]) / (fr[z + 1] - fr[z])
+            stable = fr[z + 1] > fr[z]
+            ax_r.plot([xz], [0.0], "o", ms=6, mfc="k" if stable else "w", mec="k")
+        ax_r.axhline(0.0, color="0.7", lw=0.8)
+        ax_r.set_xlabel(f"{x_unit} (DOF {i})")
+        ax_r.set_ylabel(f"restoring force ({force_unit})")
+        ax_r.set_title("restoring force (filled o: stable, open: saddle)", fontsize=9)
+        ax_r.legend(fontsize=7, loc="best")
+
+        for k, r in enumerate(recs):
+            col = COLOURS[k % len(COLOURS)]
+            vmax = float(np.max(np.abs(r.v[:, i]))) or 1.0
+            vs = np.linspace(-1.5 * vmax, 1.5 * vmax, 300)
+            Xv = np.tile(np.mean(r.x, axis=0), (vs.size, 1))
+            V = np.zeros_like(Xv)
+            V[:, i] = vs
+            fd = _forces(model, Xv, V)[1][:, i]
+            ax_d.plot(vs, fd, "-", color=col, lw=1.5, label=f"{r.name} (x = {np.mean(r.x[:, i]):.3g})")
+            ax_d.axvspan(float(np.min(r.v[:, i])), float(np.max(r.v[:, i])), color=col, alpha=0.15, lw=0)
+        ax_d.axhline(0.0, color="0.7", lw=0.8)
+        ax_d.set_xlabel(f"velocity ({x_unit}/s)")
+        ax_d.set_ylabel(f"damping force ({force_unit})")
+        ax_d.set_title("damping force at each well (shaded: recorded speeds)", fontsize=9)
+        ax_d.legend(fontsize=7, loc="best")
+
+        for k, r in enumerate(recs):
+            col = COLOURS[k % len(COLOURS)]
+            y = regression_targets(r, masses, model.topology)[:, i]
+            fr_, fd_ = _forces(model, r.x, r.v)
+            res = y - (fr_ + fd_)[:, i]
+            nrmse = float(np.sqrt(np.sum(res**2) / max(np.sum((y - y.mean()) ** 2), 1e-300)))
+            # envelope (min and max per bin of ~20 samples, 400 bins at most): every excursion
+            # shows, and the figure stays light (a 10^5-sample line makes PDFs slow and heavy)
+            nb = min(400, r.t.size)
+            edges = np.linspace(0, r.t.size, nb + 1).astype(int)
+            lo_, hi_ = np.minimum.reduceat(res, edges[:-1]), np.maximum.reduceat(res, edges[:-1])
+            ax_e.fill_between(r.t[edges[:-1]], lo_, hi_, color=col, alpha=0.5, lw=0, step="post",
+                              label=f"{r.name}: NRMSE {nrmse:.3g}")
+        ax_e.axhline(0.0, color="0.7", lw=0.8)
+        ax_e.set_xlabel("time (s)")
+        ax_e.set_ylabel(f"measured - model ({force_unit})")
+        ax_e.set_title("force residual: target (Eq. 8) - model (envelope)", fontsize=9)
+        ax_e.legend(fontsize=7, loc="best")
+    if title:
+        fig.suptitle(title)
+    if path is not None:
+        fig.savefig(path, dpi=110)
+    return fig
