@@ -14,27 +14,35 @@ def config_label(config: int, n_dof: int) -> str:
     return "-".join(str((config >> i) & 1) for i in range(n_dof))
 
 
-def basin_figure(f, A, config, n_dof: int, path=None, title: str = "") -> Figure:
+def config_colour(config: int, n_dof: int) -> tuple:
+    """The colour of a configuration, the same in every figure of an `n_dof` structure (it does
+    not depend on which configurations a map happens to contain); dark grey: not settled."""
+    if config < 0:
+        return (0.15, 0.15, 0.15, 1.0)
+    n_all = 2**n_dof
+    if n_all <= 20:
+        return matplotlib.colormaps["tab20"](config)
+    return matplotlib.colormaps["nipy_spectral"](0.05 + 0.9 * config / (n_all - 1))
+
+
+def basin_figure(f, A, config, n_dof: int, path=None, title: str = "", *, ax=None) -> Figure:
     """The final configuration over the (f, A) grid, one colour per configuration (legend in
-    the 0-1-1-0-0 style, cell 0 first; dark grey: not settled or failed). Saved to `path`
-    when given; returns the matplotlib `Figure`."""
+    the 0-1-1-0-0 style, cell 0 first; dark grey: not settled or failed). A configuration has
+    the same colour in every figure of the structure (`config_colour`), so maps side by side
+    (model vs truth) compare by eye. Draws into `ax` when given (a notebook's own layout), else
+    a new figure. Saved to `path` when given; returns the matplotlib `Figure`."""
     config = np.asarray(config)
     values = sorted(set(config.ravel().tolist()))
     index = {v: k for k, v in enumerate(values)}
     img = np.vectorize(index.get)(config)
-    n_conf = sum(v >= 0 for v in values)
-    if n_conf <= 20:
-        base = matplotlib.colormaps["tab20"]
-        pick = [base(k) for k in range(n_conf)]
-    else:  # distinct colours for every configuration (no reuse of a 20-colour cycle)
-        base = matplotlib.colormaps["nipy_spectral"]
-        pick = [base(0.05 + 0.9 * k / max(n_conf - 1, 1)) for k in range(n_conf)]
-    it = iter(pick)
-    colors = [(0.15, 0.15, 0.15, 1.0) if v < 0 else next(it) for v in values]
+    colors = [config_colour(v, n_dof) for v in values]
     cmap = ListedColormap(colors)
     norm = BoundaryNorm(np.arange(len(values) + 1) - 0.5, len(values))
-    fig = Figure(figsize=(7.5 if len(values) <= 16 else 10, 5), layout="constrained")
-    ax = fig.subplots()
+    if ax is None:
+        fig = Figure(figsize=(7.5 if len(values) <= 16 else 10, 5), layout="constrained")
+        ax = fig.subplots()
+    else:
+        fig = ax.figure
     ax.pcolormesh(np.asarray(f), np.asarray(A), img, cmap=cmap, norm=norm, shading="auto")
     handles = [Rectangle((0, 0), 1, 1, color=colors[k]) for k in range(len(values))]
     ax.legend(handles, [config_label(v, n_dof) for v in values], title="final configuration",
