@@ -48,7 +48,9 @@ def test_gmc_sindy_runs_and_degrades(joint_data):
 def test_nes_three_equilibria():
     s = g.systems.tristable_nes()
     recs = g.systems.make_recordings(s, 1e-3, snr_db=60.0, seed=0, duration=5.0)
-    m = g.reconstruct(recs, g.Library(3, 3)).value
+    said = []
+    m = g.reconstruct(recs, g.Library(3, 3), progress=said.append).value
+    assert said[0] == "local fits at 3 wells" and said[1].startswith("coordination") and "sanity" in said[-1]
     assert restoring_error(m, s.truth, 0, s.x_range[0]) < 0.02
     got, want = equilibria(m, 0, s.x_range[0]), equilibria(s.truth, 0, s.x_range[0])
     assert [st for _, st in got] == [st for _, st in want] == [True, False, True, False, True]

@@ -93,6 +93,7 @@ def run(args) -> int:
     fn = gmr.gmc_sindy if args.method == "gmc-sindy" else gmr.reconstruct
     if args.method == "gmr":
         kwargs["coordination"] = args.coordination
+        kwargs["progress"] = lambda msg: stage(f"gmr: {msg}")
     stage(f"{args.method}: local fits and coordination (the first run of a shape compiles)")
     with warnings.catch_warnings():  # printed below as `warning:` lines, once each
         warnings.simplefilter("ignore", GMRDataWarning)

@@ -16,6 +16,23 @@ def _predict(model, x, v, b, f):
     return jax.vmap(model.accelerations)(x, v, b, f)
 
 
+@eqx.filter_jit
+def _forces(model, x, v):
+    return jax.vmap(model.force)(x, v)
+
+
+def forces(model: AbstractMechanicalModel, x, v) -> np.ndarray:
+    """F(x, v) of every DOF at n states (n, dof), as NumPy: one compiled program (padded to a
+    bucket of rows, so similar sizes share it) where an eager `vmap(model.force)` dispatches
+    each of its dozens of operations separately (each traced, lowered and loaded in a new
+    process: ~20 ms apiece on 2 cores)."""
+    x, v = np.asarray(x, float), np.asarray(v, float)
+    n = x.shape[0]
+    m = _bucket(n)
+    pad = ((0, m - n), (0, 0))
+    return np.asarray(_forces(model, jnp.asarray(np.pad(x, pad)), jnp.asarray(np.pad(v, pad))))[:n]
+
+
 def _bucket(n: int) -> int:
     """Row count compiled for n rows: the next power of two (at least 16), so that calls on
     similar sizes share one compiled function."""

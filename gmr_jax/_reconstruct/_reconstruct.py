@@ -1,6 +1,7 @@
 """The end-to-end reconstruction of Algorithm 1 on recordings, and the GMC-SINDy baseline."""
 
 import warnings as _warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import equinox as eqx
@@ -16,6 +17,7 @@ from .._fit._local_fit import AutoThreshold, LocalFit, fit_local
 from .._fit._stls import STLS, compress, stls_qr
 from .._fit._threshold import default_thresholds, select_threshold
 from .._model._model import GlobalModel
+from .._model._predict import forces
 from .._recordings._recording import Recording, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
@@ -194,7 +196,7 @@ def training_scores(model: GlobalModel, recs, masses, topology) -> dict:
     out = {}
     for r in recs:
         y = regression_targets(r, masses, topology)
-        yhat = np.asarray(jax.vmap(model.force)(jnp.asarray(r.x), jnp.asarray(r.v)))
+        yhat = forces(model, r.x, r.v)
         resid = np.sum((y - yhat) ** 2, axis=0)
         total = np.sum((y - y.mean(axis=0)) ** 2, axis=0)
         out[r.name] = {"r2": (1 - resid / total).tolist(), "nrmse": np.sqrt(resid / total).tolist()}
@@ -221,7 +223,13 @@ def _fit_wells(xs, vs, ys, w, library, solver, select, keep=None):
     # batched weights and the CV threshold sweep stalled in XLA:CPU (jax 0.10), so loop here.
     sols = [fit_local(xs[k], vs[k], ys[k], library, solver, select, weights=w[k], keep=keep, throw=False)
             for k in range(xs.shape[0])]
-    return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *sols)
+    return _stack(sols)
+
+
+@eqx.filter_jit
+def _stack(trees):
+    """The trees stacked leaf by leaf (one compiled program, not one eager stack per leaf)."""
+    return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *trees)
 
 
 def velocity_terms_not_shared(coef: np.ndarray, library: Library) -> np.ndarray:
@@ -290,7 +298,7 @@ def _well_r2(g: GlobalCoefficients, xs, vs, ys, w) -> np.ndarray:
     model = GlobalModel(masses=jnp.ones(1), stiffness=g.stiffness[None], velocity_damping=g.velocity_damping[None],
                         position_damping=g.position_damping[None])
     xs, vs, ys, w = (np.asarray(a) for a in (xs, vs, ys, w))
-    yhat = np.asarray(jax.vmap(model.force)(jnp.asarray(xs.reshape(-1, 1)), jnp.asarray(vs.reshape(-1, 1))))
+    yhat = forces(model, xs.reshape(-1, 1), vs.reshape(-1, 1))
     yhat = yhat.reshape(xs.shape)
     out = []
     for k in range(xs.shape[0]):
@@ -381,6 +389,7 @@ def reconstruct(
     keep_restoring_order: int | None = None,
     shared_damping: bool = True,
     throw: bool = True,
+    progress: Callable[[str], None] | None = None,
 ) -> Solution:
     """Global model reconstruction, Algorithm 1, from small-vibration recordings.
 
@@ -422,6 +431,8 @@ def reconstruct(
 
     - `throw`: raise `GMRComputationError` on a numerical failure (a local fit or the
       coordination); with False, read `result` (the model then holds NaN where it failed).
+    - `progress`: called with a short sentence at each stage (per DOF: local fits,
+      coordination; then the checks), e.g. `print`; the command line prints them with times.
 
     **Returns:** a `Solution` whose `value` is the `GlobalModel` (standard errors attached),
     `result` a `RESULTS` code, and `stats`: `method` ("GMR"), `library`, `dofs` (per-DOF
@@ -437,6 +448,7 @@ def reconstruct(
     computed.
     """
     failure = _Failure("reconstruct", throw)
+    say = progress or (lambda msg: None)
     measured = all(r.v is not None and r.a is not None and not r.derived for r in recordings)
     if keep_restoring_order is None:
         keep_restoring_order = 3 if measured else 1
@@ -453,6 +465,7 @@ def reconstruct(
         ys, _ = _pad_stack([[targets[k][:, i] for k in g] for g in groups])
         xs, vs, ys, w = (jnp.asarray(a) for a in (xs, vs, ys, w))
         keep = jnp.asarray(low_order_terms(library, keep_restoring_order)) if keep_low_orders else None
+        say(f"{f'DOF {i + 1}/{d}: ' if d > 1 else ''}local fits at {len(groups)} wells")
         sols = _fit_wells(xs, vs, ys, w, library, solver, select, keep)
         fits: LocalFit = sols.value
         if screen_sigma is not None:
@@ -464,6 +477,7 @@ def reconstruct(
         if shared_damping:
             fits, dropped = _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_sigma, i,
                                                     failure)
+        say(f"{f'DOF {i + 1}/{d}: ' if d > 1 else ''}coordination ({coordination})")
         why, route = [], "gls" if coordination == "auto" else coordination
         speed = _speed(fits, vs, w, masses[i], library) if coordination in ("auto", "joint") else None
         if coordination == "joint":
@@ -546,6 +560,7 @@ def reconstruct(
             | {"dropped_velocity_damping": dropped, "coordination": route, "paper_route_rejected": why,
                "escapes": _sanity.escapes(np.asarray(g.stiffness), eq)},
         ))
+    say("training scores, sanity checks, resolution report")
     stderr = {STIFFNESS: jnp.asarray(stack_padded(se_s)), VELOCITY_DAMPING: jnp.asarray(stack_padded(se_v)),
               POSITION_DAMPING: jnp.asarray(stack_padded(se_p))}
     model = _model_from_blocks(masses, topology, stiff, vdamp, pdamp, stderr)
