@@ -91,3 +91,17 @@ def test_equations_readable():
     eq = m.equations()
     assert eq[0] == "F_0(x, v) = -30 x + 1e+05 x^3 + 0.2 v"
     assert "0.031 sgn(v)" in eq[1] and "50 x^2*v" in eq[1]
+
+
+def test_save_model_from_a_solution_keeps_metadata(tmp_path):
+    model = g.from_terms([1.0], [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": 2.0}])
+    sol = g.Solution(value=model, result=g.RESULTS.successful,
+                     stats={"method": "GMR", "library": g.Library(3, 2), "warnings": ("a warning",),
+                            "training": {"S1": {"r2": [0.99], "nrmse": [0.1]}}})
+    g.save_model(sol, tmp_path / "m.json", data_range=[[-1.0, 1.0]])
+    d = json.loads((tmp_path / "m.json").read_text())
+    assert d["method"] == "GMR" and d["library"] == {"r": 3, "d": 2} and d["warnings"] == ["a warning"]
+    assert d["training"]["S1"]["r2"] == [0.99] and d["data_range"] == [[-1.0, 1.0]]
+    assert g.load_model(tmp_path / "m.json").stiffness.tolist() == model.stiffness.tolist()
+    with pytest.raises(g.GMRInputError, match="save_model writes a GlobalModel"):
+        g.save_model({"not": "a model"}, tmp_path / "x.json")
