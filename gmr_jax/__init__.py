@@ -52,6 +52,7 @@ from ._model._model import (
     from_terms as from_terms,
 )
 from ._model._predict import predict as predict
+from ._model._uncertainty import ForceBand as ForceBand, force_band as force_band, sample_models as sample_models
 from ._model._pysindy import from_pysindy as from_pysindy, to_pysindy as to_pysindy
 
 # reconstruction (Algorithm 1) and the GMC-SINDy baseline
@@ -80,6 +81,7 @@ from ._simulate._simulate import simulate as simulate
 # basins of deployment (Fig. 11)
 from ._basins._sweep import BasinMap as BasinMap, SweepSettings as SweepSettings, basin_map as basin_map
 from ._basins._wells import stable_wells as stable_wells
+from ._basins._probability import BasinProbability as BasinProbability, basin_probability as basin_probability
 
 # refinement on trajectories
 from ._refine._refine import RefineSettings as RefineSettings, refine as refine

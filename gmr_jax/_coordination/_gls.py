@@ -40,6 +40,42 @@ def _whitener(cov: Float[Array, "n o o"], active: Float[Array, "n o"]):
     return inv * active[:, :, None]  # rows of inactive orders vanish
 
 
+def weighted_system(nodes, taylor, order, cov):
+    """The whitened confluent Vandermonde system of `hermite_gls` in scaled coordinates:
+    `(a_w, b_w, c, h, active)` with the monomial coefficients of the fit in s = (x - c) / h."""
+    n, rp1 = taylor.shape
+    size = n * rp1
+    c, h = scaling(nodes)
+    s = (nodes - c) / h
+    vand = confluent_vandermonde(s, rp1 - 1, size).reshape(n, rp1, size)
+    jpow = jnp.arange(rp1)
+    hp = h ** jpow.astype(taylor.dtype)
+    rhs = taylor * hp[None, :]
+    scov = cov * hp[None, :, None] * hp[None, None, :]
+    active = (jpow[None, :] <= order[:, None]).astype(taylor.dtype)
+    winv = _whitener(scov, active)
+    a_w = jnp.einsum("nij,njk->nik", winv, vand).reshape(size, size)
+    b_w = jnp.einsum("nij,nj->ni", winv, rhs).reshape(size)
+    return a_w, b_w, c, h, active
+
+
+def weighted_fit(a_w, b_w, k):
+    """Least-squares fit of degree `k` (scaled monomials) to the whitened system; returns the
+    coefficients, the chi-squared and the condition number of the kept columns."""
+    size = a_w.shape[1]
+    p = jnp.arange(size)
+    keep = (p <= k).astype(a_w.dtype)
+    mat = jnp.concatenate([a_w * keep[None, :], jnp.diag(1.0 - keep)], axis=0)
+    rhs_aug = jnp.concatenate([b_w, jnp.zeros(size)])
+    q, r = jnp.linalg.qr(mat)
+    coef = jax.scipy.linalg.solve_triangular(r, q.T @ rhs_aug, lower=False)
+    chi2 = jnp.sum((a_w @ coef - b_w) ** 2)
+    sv = jnp.linalg.svd(a_w * keep[None, :], compute_uv=False)
+    nz = jnp.sum(keep)
+    smin = jnp.sort(sv)[::-1][jnp.clip(nz.astype(int) - 1, 0, size - 1)]
+    return coef, chi2, sv[0] / smin
+
+
 def hermite_gls(
     nodes: Float[Array, " n"],
     taylor: Float[Array, "n orders"],
@@ -62,34 +98,11 @@ def hermite_gls(
     """
     n, rp1 = taylor.shape
     size = n * rp1
-    c, h = scaling(nodes)
-    s = (nodes - c) / h
-    vand = confluent_vandermonde(s, rp1 - 1, size).reshape(n, rp1, size)
-    jpow = jnp.arange(rp1)
-    hp = h ** jpow.astype(taylor.dtype)
-    rhs = taylor * hp[None, :]
-    scov = cov * hp[None, :, None] * hp[None, None, :]
-    active = (jpow[None, :] <= order[:, None]).astype(taylor.dtype)
-    winv = _whitener(scov, active)
-    a_w = jnp.einsum("nij,njk->nik", winv, vand).reshape(size, size)
-    b_w = jnp.einsum("nij,nj->ni", winv, rhs).reshape(size)
+    a_w, b_w, c, h, active = weighted_system(nodes, taylor, order, cov)
     m = jnp.sum(active)
     k_herm = n - 1 + jnp.sum(order)
     p = jnp.arange(size)
-
-    def fit(k):
-        keep = (p <= k).astype(a_w.dtype)
-        mat = jnp.concatenate([a_w * keep[None, :], jnp.diag(1.0 - keep)], axis=0)
-        rhs_aug = jnp.concatenate([b_w, jnp.zeros(size)])
-        q, r = jnp.linalg.qr(mat)
-        coef = jax.scipy.linalg.solve_triangular(r, q.T @ rhs_aug, lower=False)
-        chi2 = jnp.sum((a_w @ coef - b_w) ** 2)
-        sv = jnp.linalg.svd(a_w * keep[None, :], compute_uv=False)
-        nz = jnp.sum(keep)
-        smin = jnp.sort(sv)[::-1][jnp.clip(nz.astype(int) - 1, 0, size - 1)]
-        return coef, chi2, sv[0] / smin
-
-    coefs, chi2, cond = jax.vmap(fit)(p)
+    coefs, chi2, cond = jax.vmap(lambda k: weighted_fit(a_w, b_w, k))(p)
     dof = m - p - 1
     pval = jnp.where(dof > 0, jax.scipy.special.gammaincc(jnp.maximum(dof, 1) / 2, chi2 / 2), 0.0)
     ok = (pval > alpha) & (p >= 2 * n - 1) & (p < k_herm)

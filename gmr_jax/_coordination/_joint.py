@@ -232,7 +232,11 @@ def joint_coordinate(
     monomial coefficients in x (F: K_max + 1; B_j of sgn(v)|v|^j up to the largest
     velocity order, B_1 the viscous term C(0); C_j of x^j v, C_0 = 0), the covariance of their
     concatenation, and `stats` (the chosen degree, damping set, penalty weights, BIC, the
-    number of admissible candidates, whether the chosen one is admissible, sigma^2).
+    number of admissible candidates, whether the chosen one is admissible, sigma^2; and
+    `joint_alternative`: the best admissible candidate of another degree minus the chosen one,
+    times the square root of its model-averaging weight 1 / (1 + exp(delta BIC / 2)), in the same
+    flat layout, zeros when there is none: the degree choice's discrepancy that `reconstruct`
+    adds to the covariance).
     """
     xs, vs, ys, weights = (np.asarray(a, float) for a in (xs, vs, ys, weights))
     eq = np.asarray(equilibria, float)
@@ -289,12 +293,25 @@ def joint_coordinate(
         lin[off_v + order, layout.k + layout.j + 2 + i] = 1.0 / scale[layout.k + layout.j + 2 + i]
     flat = lin @ theta[best]
     cov = lin @ cov_theta @ lin.T
+    # the degree choice's discrepancy (issue 15): the best admissible candidate of another degree K
+    # (the runner-up law), as a difference to the chosen one, weighted as in Bayesian model averaging
+    # over the two: the score is -2 log evidence, so the runner-up's posterior weight is
+    # w = 1 / (1 + exp(delta / 2)) and E[(F - F_chosen)^2] gains w (F_alt - F_chosen)^2
+    degrees = np.array([mt[0] for mt in meta])
+    pool = admissible & (degrees != k) & np.isfinite(bic)
+    alt = int(np.argmin(np.where(pool, bic, np.inf))) if pool.any() else None
+    if alt is not None:
+        weight = 1.0 / (1.0 + np.exp(min(0.5 * float(bic[alt] - bic[best]), 700.0)))
+        alternative = np.sqrt(weight) * (lin @ theta[alt] - lin @ theta[best])
+    else:
+        alternative = np.zeros(g_size)
     stats = {"joint_degree": k, "joint_damping_degree": j, "joint_velocity_orders": list(vel),
              "joint_log_lambda": float(settings.log_lambdas[lam_r[best]]),
              "joint_log_lambda_damping": float(settings.log_lambdas_damping[lam_d[best]]),
              "joint_bic": float(bic[best]), "joint_edf": float(edf[best]), "joint_sigma2": sigma2,
              "joint_admissible": bool(admissible[best]), "joint_n_admissible": int(admissible.sum()),
-             "joint_n_candidates": int(admissible.size)}
+             "joint_n_candidates": int(admissible.size),
+             "joint_alternative": alternative.tolist(), "joint_alternative_degree": -1 if alt is None else meta[alt][0]}
     return (flat[: layout.k + 1], flat[off_v:off_p], flat[off_p:], cov, stats)
 
 

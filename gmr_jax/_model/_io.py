@@ -8,7 +8,7 @@ import numpy as np
 
 from .._errors import GMRInputError, describe
 from .._topology import TOPOLOGIES
-from ._model import GlobalModel, check_masses, check_terms, from_terms
+from ._model import GlobalModel, check_covariance, check_masses, check_terms, covariance_entries, from_terms
 
 FORMAT = "gmr-model/1"
 
@@ -26,6 +26,9 @@ def model_to_dict(model: GlobalModel, **extra) -> dict:
         "masses": [float(m) for m in np.asarray(model.masses)],
         "terms": terms,
     }
+    cov = covariance_entries(model)
+    if cov is not None:  # optional extension (old readers ignore it; files without it still load)
+        out["covariance"] = cov
     out.update(extra)
     return out
 
@@ -51,7 +54,10 @@ def model_from_dict(d: dict, source: str = "model") -> GlobalModel:
     if "stderr" in d:
         raise GMRInputError(f"{source}: a top-level 'stderr' is not part of {FORMAT}; give each term "
                             f"its own \"stderr\" key")
-    return from_terms(masses, terms, topo)
+    cov = d.get("covariance")
+    if cov is not None:
+        check_covariance(cov, masses.size, source)  # messages name the file
+    return from_terms(masses, terms, topo, covariance=cov)
 
 
 def save_model(model, path, **extra) -> None:

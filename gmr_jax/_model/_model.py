@@ -71,6 +71,11 @@ class GlobalModel(AbstractMechanicalModel):
     - `velocity_damping` (dof, orders): B_ij of sgn(v)|v|^j.
     - `position_damping` (dof, orders): C_ij of x^j v.
     - `stderr`: optional standard errors, same structure (from the coordination's covariance).
+    - `covariance`: optional (dof, p, p) covariance of each DOF's coefficients, flattened as
+      `coefficients(model)` orders them (stiffness, then velocity_damping, then
+      position_damping, p = the three widths summed); DOFs are fitted apart, so there is no
+      covariance between DOFs. Set by `reconstruct` (calibrated, see `force_band`), None when
+      unknown (a hand-written model, a refined one). Drives `force_band` and `sample_models`.
     - `sign_eps`: 0 for the exact sgn(v); > 0 replaces it by tanh(v/eps) (for gradients).
     """
 
@@ -81,6 +86,7 @@ class GlobalModel(AbstractMechanicalModel):
     topology: AbstractTopology = eqx.field(static=True, default=Independent(), converter=as_topology)
     sign_eps: float = eqx.field(static=True, default=0.0)
     stderr: dict | None = None
+    covariance: Float[Array, "dof p p"] | None = None
 
     def restoring(self, x):
         return jax.vmap(polyval)(self.stiffness, x)
@@ -227,9 +233,85 @@ def check_terms(terms, n_dof: int, source: str = "from_terms", duplicates: str =
     return out
 
 
+def coefficient_index(model: GlobalModel) -> list[tuple[str, int]]:
+    """(physics, order) of each position of a DOF's flattened coefficient vector (the layout of
+    `GlobalModel.covariance`): stiffness 0.., then velocity_damping 0.., then position_damping 0..."""
+    return [(name, k) for name in KNOWN_PHYSICS for k in range(np.shape(getattr(model, name))[-1])]
+
+
+def coefficients(model: GlobalModel) -> Float[Array, "*batch dof p"]:
+    """Each DOF's coefficients flattened in the layout of `GlobalModel.covariance`."""
+    return jnp.concatenate([model.stiffness, model.velocity_damping, model.position_damping], axis=-1)
+
+
+_COV_FIX = ('the covariance is a list of {"dof": i, "terms": [[physics, order], ...], "matrix": [[...], ...]} '
+            'entries, one per DOF at most, the matrix square, symmetric, finite, with a non-negative diagonal, '
+            'one row per listed term; omit the key when the covariance is unknown')
+
+
+def check_covariance(entries, n_dof: int, source: str = "from_terms") -> list[dict]:
+    """Validate the "covariance" extension of "gmr-model/1" (see `from_terms`); returns
+    normalised entries (int dof, (physics, order) tuples, float64 matrix). Raises
+    `GMRInputError` naming the entry, the key and the fix."""
+    if not isinstance(entries, (list, tuple)):
+        raise GMRInputError(f"{source}: 'covariance' must be a list, got {describe(entries)}; {_COV_FIX}")
+    out, seen = [], set()
+    for i, e in enumerate(entries):
+        where = f"{source}: covariance entry {i}"
+        if not isinstance(e, dict) or set(e) != {"dof", "terms", "matrix"}:
+            raise GMRInputError(f"{where} must be a dict with exactly the keys 'dof', 'terms', 'matrix', got "
+                                f"{describe(e)}; {_COV_FIX}")
+        dof = as_whole_number(e["dof"], f"{where}: 'dof'", accept_float=True, fix=f"DOFs are numbered 0..{n_dof - 1}")
+        if not 0 <= dof < n_dof or dof in seen:
+            raise GMRInputError(f"{where}: dof {dof} is outside 0..{n_dof - 1} or appears twice; {_COV_FIX}")
+        seen.add(dof)
+        keys = []
+        if not isinstance(e["terms"], (list, tuple)):
+            raise GMRInputError(f"{where}: 'terms' must be a list of [physics, order] pairs; {_COV_FIX}")
+        for t in e["terms"]:
+            if (not isinstance(t, (list, tuple)) or len(t) != 2 or not isinstance(t[0], str)
+                    or t[0] not in KNOWN_PHYSICS):
+                raise GMRInputError(f"{where}: term {describe(t)} is not a [physics, order] pair with physics one "
+                                    f"of {', '.join(KNOWN_PHYSICS)}")
+            keys.append((t[0], as_whole_number(t[1], f"{where}: order of {t[0]}", lo=0, hi=MAX_ORDER,
+                                               accept_float=True)))
+        if len(set(keys)) != len(keys):
+            raise GMRInputError(f"{where}: a term is listed twice in 'terms'; {_COV_FIX}")
+        try:
+            mat = np.asarray(e["matrix"], dtype=np.float64)
+        except (TypeError, ValueError):
+            raise GMRInputError(f"{where}: 'matrix' is not a numeric square matrix; {_COV_FIX}") from None
+        n = len(keys)
+        if mat.shape != (n, n) and not (n == 0 and mat.size == 0):
+            raise GMRInputError(f"{where}: 'matrix' has shape {mat.shape} for {n} terms; {_COV_FIX}")
+        mat = mat.reshape(n, n)
+        if not np.all(np.isfinite(mat)) or np.any(np.diag(mat) < 0):
+            raise GMRInputError(f"{where}: 'matrix' has a non-finite entry or a negative variance; {_COV_FIX}")
+        if not np.allclose(mat, mat.T, rtol=1e-9, atol=0.0):
+            raise GMRInputError(f"{where}: 'matrix' is not symmetric; {_COV_FIX}")
+        out.append({"dof": dof, "terms": keys, "matrix": 0.5 * (mat + mat.T)})
+    return out
+
+
+def covariance_entries(model: GlobalModel) -> list[dict] | None:
+    """The model's covariance as "covariance" extension entries (JSON-ready; only the
+    coefficients with a nonzero variance), or None."""
+    if model.covariance is None:
+        return None
+    cov = np.asarray(model.covariance)
+    index = coefficient_index(model)
+    out = []
+    for i in range(cov.shape[0]):
+        keep = np.nonzero(np.diag(cov[i]) > 0)[0]
+        if keep.size:
+            out.append({"dof": i, "terms": [[index[k][0], index[k][1]] for k in keep],
+                        "matrix": [[float(c) for c in row] for row in cov[i][np.ix_(keep, keep)]]})
+    return out
+
+
 def from_terms(
     masses, terms: list[dict], topology: str = "independent", *, min_orders: dict | None = None,
-    duplicates: str = "error",
+    duplicates: str = "error", covariance: list[dict] | None = None,
 ) -> GlobalModel:
     """Build a `GlobalModel` from "gmr-model/1" term dicts.
 
@@ -242,6 +324,10 @@ def from_terms(
     - `min_orders`: smallest number of columns per physics (`{"stiffness": 4}`).
     - `duplicates`: "error" (default): two terms with the same (dof, physics, order) are
       refused; "add": their coefficients add (used to apply corrections to a model).
+    - `covariance`: optional covariance of the coefficients, the "covariance" extension of the
+      model file: a list of `{"dof": i, "terms": [[physics, order], ...], "matrix": [[...]]}`
+      (per DOF, the covariance of the listed coefficients; coefficients not listed have zero
+      variance and covariance). Becomes `GlobalModel.covariance`; None (default): unknown.
 
     Raises `GMRInputError` naming the bad term and key (see `check_terms`).
 
@@ -269,9 +355,11 @@ def from_terms(
                             f"{describe(min_orders)}")
     for k, v in min_orders.items():
         as_whole_number(v, f"from_terms: min_orders[{k!r}]", lo=1)
+    cov_entries = None if covariance is None else check_covariance(covariance, d)
     arrays, errs = {}, {}
     for name in KNOWN_PHYSICS:
         orders = [t["order"] for t in terms if t["physics"] == name]
+        orders += [o for e in (cov_entries or []) for ph, o in e["terms"] if ph == name]
         size = max([o + 1 for o in orders] + [min_orders.get(name, 1)])
         arrays[name] = np.zeros((d, size))
         errs[name] = np.full((d, size), np.nan)
@@ -280,6 +368,15 @@ def from_terms(
         if "stderr" in t:
             errs[t["physics"]][t["dof"], t["order"]] = t["stderr"]
     has_err = any("stderr" in t for t in terms)
+    cov = None
+    if cov_entries is not None:
+        offsets = np.cumsum([0] + [arrays[name].shape[1] for name in KNOWN_PHYSICS])
+        start = dict(zip(KNOWN_PHYSICS, offsets[:-1]))
+        cov = np.zeros((d, offsets[-1], offsets[-1]))
+        for e in cov_entries:
+            idx = np.array([start[ph] + o for ph, o in e["terms"]], int)
+            cov[e["dof"]][np.ix_(idx, idx)] = e["matrix"]
+        cov = jnp.asarray(cov)
     return GlobalModel(
         masses=jnp.asarray(masses),
         stiffness=jnp.asarray(arrays[STIFFNESS]),
@@ -287,4 +384,5 @@ def from_terms(
         position_damping=jnp.asarray(arrays[POSITION_DAMPING]),
         topology=topology,
         stderr={k: jnp.asarray(v) for k, v in errs.items()} if has_err else None,
+        covariance=cov,
     )

@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._coordination._coordinate import GlobalCoefficients, coordinate, split_flat
+from .._coordination._discrepancy import add_discrepancy, calibrate_covariance
 from .._coordination._joint import JointSettings, damping_faults, joint_coordinate, restoring_faults
 from .._errors import GMRInputError
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, Library
@@ -180,7 +181,19 @@ def stack_padded(rows) -> np.ndarray:
     return np.stack([np.pad(np.asarray(r, float), (0, n - np.asarray(r).shape[0])) for r in rows])
 
 
-def _model_from_blocks(masses, topology, stiff, vdamp, pdamp, stderr=None) -> GlobalModel:
+def stack_covariances(covs, stiff, vdamp, pdamp) -> np.ndarray:
+    """Per-DOF covariances of (stiffness, velocity_damping, position_damping) concatenated at
+    each DOF's own widths, placed into the padded layout of `GlobalModel.covariance`."""
+    widths = [[np.asarray(b[i]).shape[0] for b in (stiff, vdamp, pdamp)] for i in range(len(covs))]
+    top = np.max(np.array(widths), axis=0)
+    out = np.zeros((len(covs), int(top.sum()), int(top.sum())))
+    for i, (c, w) in enumerate(zip(covs, widths)):
+        idx = np.concatenate([off + np.arange(n) for off, n in zip(np.cumsum([0, *top[:-1]]), w)])
+        out[i][np.ix_(idx, idx)] = np.asarray(c, float)
+    return out
+
+
+def _model_from_blocks(masses, topology, stiff, vdamp, pdamp, stderr=None, covariance=None) -> GlobalModel:
     return GlobalModel(
         masses=jnp.asarray(masses),
         stiffness=jnp.asarray(stack_padded(stiff)),
@@ -188,6 +201,7 @@ def _model_from_blocks(masses, topology, stiff, vdamp, pdamp, stderr=None) -> Gl
         position_damping=jnp.asarray(stack_padded(pdamp)),
         topology=topology,
         stderr=stderr,
+        covariance=None if covariance is None else jnp.asarray(stack_covariances(covariance, stiff, vdamp, pdamp)),
     )
 
 
@@ -374,6 +388,28 @@ def _joint(fits: LocalFit, xs, vs, ys, w, speed: float, restoring: Solution | No
                     aux=jnp.asarray(cov))
 
 
+def _calibrated(coord: Solution, fits: LocalFit, library: Library, route: str, paper_sound: bool):
+    """One DOF's global coefficients and their calibrated covariance (`_discrepancy`): the
+    paper route's propagated covariance with its residual scale and embedded-error discrepancy;
+    the joint regression's posterior covariance plus its degree choice's discrepancy (the best
+    admissible law of another degree, `joint_alternative`) and, where the paper route's local
+    Taylor data were sound (each well explained: `paper_sound`), the paper route's embedded-error
+    discrepancy (blocks padded where that is longer). Returns `(GlobalCoefficients, covariance)`."""
+    g, cov = coord.value, np.asarray(coord.aux)
+    if not np.all(np.isfinite(cov)) or not np.all(np.isfinite(np.asarray(g.flat()))):
+        return g, cov
+    if route == "joint":
+        alt = np.asarray(coord.stats.get("joint_alternative", np.zeros(cov.shape[0])), float)
+        cov = cov + np.outer(alt, alt)
+        if not paper_sound:
+            return g, cov
+        s, b, p, cov = add_discrepancy(g.stiffness, g.velocity_damping, g.position_damping, cov, fits, library)
+        return GlobalCoefficients(jnp.asarray(s), jnp.asarray(b), jnp.asarray(p)), cov
+    if route == "gls + joint damping":
+        return g, calibrate_covariance(fits, library, cov, method="gls", damping=False)
+    return g, calibrate_covariance(fits, library, cov, method=route)
+
+
 def reconstruct(
     recordings: list[Recording],
     library: Library = Library(5, 5),
@@ -434,7 +470,12 @@ def reconstruct(
     - `progress`: called with a short sentence at each stage (per DOF: local fits,
       coordination; then the checks), e.g. `print`; the command line prints them with times.
 
-    **Returns:** a `Solution` whose `value` is the `GlobalModel` (standard errors attached),
+    **Returns:** a `Solution` whose `value` is the `GlobalModel` (standard errors attached:
+    the local fits' noise propagated through the coordination; and `covariance`, the calibrated
+    covariance of each DOF's coefficients that `force_band` and `sample_models` use: that
+    propagated noise with the coordination's residual scale plus a model-discrepancy term for
+    what the local data do not fix between the wells, see `_coordination/_discrepancy.py`; on
+    the joint route its posterior covariance plus the degree choice's discrepancy),
     `result` a `RESULTS` code, and `stats`: `method` ("GMR"), `library`, `dofs` (per-DOF
     `DofReport`: equilibria, local coefficients and standard errors, thresholds, global orders,
     condition numbers), `training` (R² and NRMSE per recording and DOF), `warnings` (plain-words
@@ -456,7 +497,7 @@ def reconstruct(
     d = recs[0].n_dof
     wells = [_wells(recs, i, well_tol) for i in range(d)]  # refusals before any fit
     targets = [regression_targets(r, masses, topology) for r in recs]
-    stiff, vdamp, pdamp, se_s, se_v, se_p, reports = [], [], [], [], [], [], []
+    stiff, vdamp, pdamp, se_s, se_v, se_p, covs, reports = [], [], [], [], [], [], [], []
     k1 = library.terms().index((STIFFNESS, 1)) if library.restoring_order >= 1 else None
     for i in range(d):
         _, labels, groups = wells[i]
@@ -479,6 +520,7 @@ def reconstruct(
                                                     failure)
         say(f"{f'DOF {i + 1}/{d}: ' if d > 1 else ''}coordination ({coordination})")
         why, route = [], "gls" if coordination == "auto" else coordination
+        paper_sound = False  # the paper route's local Taylor data explain every well (auto only)
         speed = _speed(fits, vs, w, masses[i], library) if coordination in ("auto", "joint") else None
         if coordination == "joint":
             coord = _joint(fits, xs, vs, ys, w, speed)
@@ -488,6 +530,7 @@ def reconstruct(
                 faults = _paper_route_faults(coord, fits, xs, vs, ys, w, speed)
                 why = faults["restoring"] + faults["damping"] + faults["data"]
                 paper = coord
+                paper_sound = not faults["data"]
                 if faults["data"]:
                     coord, route = _joint(fits, xs, vs, ys, w, speed), "joint"
                 else:
@@ -546,6 +589,11 @@ def reconstruct(
         warnings += _sanity.check_determination(i, np.asarray(g.stiffness), np.asarray(coord.aux)[:n_k, :n_k],
                                                 float(xall.min()), float(xall.max()))
         se = split_flat(jnp.sqrt(jnp.clip(jnp.diag(coord.aux), 0.0)), g)
+        g, cov_i = _calibrated(coord, fits, library, route, paper_sound)
+        se = GlobalCoefficients(*(np.pad(np.asarray(a), (0, np.asarray(b).shape[0] - np.asarray(a).shape[0]))
+                                  for a, b in zip((se.stiffness, se.velocity_damping, se.position_damping),
+                                                  (g.stiffness, g.velocity_damping, g.position_damping))))
+        covs.append(cov_i)
         stiff.append(np.asarray(g.stiffness)), vdamp.append(np.asarray(g.velocity_damping))
         pdamp.append(np.asarray(g.position_damping))
         se_s.append(np.asarray(se.stiffness)), se_v.append(np.asarray(se.velocity_damping))
@@ -563,7 +611,7 @@ def reconstruct(
     say("training scores, sanity checks, resolution report")
     stderr = {STIFFNESS: jnp.asarray(stack_padded(se_s)), VELOCITY_DAMPING: jnp.asarray(stack_padded(se_v)),
               POSITION_DAMPING: jnp.asarray(stack_padded(se_p))}
-    model = _model_from_blocks(masses, topology, stiff, vdamp, pdamp, stderr)
+    model = _model_from_blocks(masses, topology, stiff, vdamp, pdamp, stderr, covs)
     training = training_scores(model, recs, masses, topology)
     warnings += _sanity.check_fit_quality(training)
     resolution = _resolution.resolution_report(recs, targets, [wl[2] for wl in wells], reports, model, library,

@@ -216,7 +216,7 @@ def shooting_problem(
         c = np.abs(np.asarray(getattr(model, phys))[rows, cols])
         scales.append(np.where(c > 0, c, 1.0))
     scales = np.concatenate(scales)
-    m = dataclasses.replace(model, stderr=None)
+    m = dataclasses.replace(model, stderr=None, covariance=None)
     if _uses_sign(model, mask):
         v_rms = float(np.sqrt(np.mean(np.concatenate([np.asarray(r.v).ravel() ** 2 for r in recs]))))
         m = m.with_sign_eps(settings.sign_eps * max(v_rms, 1e-300))
@@ -284,7 +284,7 @@ def refine(
     r0, ok0 = _residuals(problem, p0, windows)
     cost0 = float(jnp.sum(r0**2))
     p, result, steps, cost1, ok = _solve(problem, p0, windows, settings.solver, settings.max_iterations)
-    refined = dataclasses.replace(problem.to_model(p), sign_eps=0.0, stderr=None)
+    refined = dataclasses.replace(problem.to_model(p), sign_eps=0.0, stderr=None, covariance=None)
     exact0 = dataclasses.replace(model, sign_eps=0.0)
     oname = code_name(result)
     if not bool(np.all(np.isfinite(np.asarray(p)))):

@@ -4,10 +4,12 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ..metrics._metrics import _grid_forces, damping_error_map
+from ._band import draw_restoring_band
 
 
 def case_figure(system, models: dict, recordings, path=None, dof: int = 0, title: str = "") -> Figure:
-    """One row: restoring force (truth, each model, the ranges the data covered) and, per
+    """One row: restoring force (truth, each model with its 95 % band when it has a covariance,
+    `band_figure`; the ranges the data covered) and, per
     model, the damping-error map e_d = log10|F_d - F_d,true| (Eq. 22) on the phase plane.
     Saved to `path` when given; returns the matplotlib `Figure`."""
     truth = system.truth
@@ -21,6 +23,7 @@ def case_figure(system, models: dict, recordings, path=None, dof: int = 0, title
     styles = ["r--", "b:", "g-."]
     for (name, m), st in zip(models.items(), styles):
         ax.plot(xs, _grid_forces(m, dof, xs, np.zeros(1), "restoring")[:, 0], st, lw=1.8, label=name)
+        draw_restoring_band(ax, m, dof, xs, color=st[0], label=name)  # when the model has a covariance
     f_true = _grid_forces(truth, dof, xs, np.zeros(1), "restoring")[:, 0]
     span = np.ptp(f_true)
     ax.set_ylim(f_true.min() - 0.3 * span, f_true.max() + 0.3 * span)

@@ -1,0 +1,256 @@
+"""Uncertainty of the global model (issue 15): the covariance on the model and in its file, the
+force band (exact linear propagation) against Monte Carlo, sampled models under jit/vmap/grad,
+the calibrated covariance of a reconstruction, and basin maps drawn from the distribution."""
+
+import json
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gmr_jax as g
+from gmr_jax._coordination._discrepancy import calibrate_covariance
+from gmr_jax._model._model import coefficient_index, coefficients
+
+
+def _model(topology="independent"):
+    """Two DOFs: bistable cubic springs with mixed damping and a full, correlated covariance."""
+    terms = []
+    for i, (k1, k3) in enumerate([(-1.0, 1.0), (-2.0, 1.5)]):
+        terms += [{"dof": i, "physics": "stiffness", "order": 1, "coefficient": k1},
+                  {"dof": i, "physics": "stiffness", "order": 3, "coefficient": k3},
+                  {"dof": i, "physics": "velocity_damping", "order": 1, "coefficient": 0.1},
+                  {"dof": i, "physics": "velocity_damping", "order": 3, "coefficient": 0.02},
+                  {"dof": i, "physics": "position_damping", "order": 2, "coefficient": 0.3}]
+    rng = np.random.default_rng(0)
+    cov = []
+    keys = [["stiffness", 0], ["stiffness", 1], ["stiffness", 3], ["velocity_damping", 1],
+            ["velocity_damping", 3], ["position_damping", 2]]
+    for i in range(2):
+        a = rng.normal(size=(6, 6)) * np.array([0.02, 0.05, 0.03, 0.01, 0.004, 0.02])[:, None]
+        cov.append({"dof": i, "terms": keys, "matrix": (a @ a.T).tolist()})
+    return g.from_terms([1.0, 2.0], terms, topology, covariance=cov)
+
+
+def test_band_is_exact_linear_propagation_and_matches_samples():
+    m = _model()
+    x, v = jnp.array([0.7, -1.2]), jnp.array([0.5, -0.8])
+    samples = g.sample_models(m, jax.random.key(1), 40_000)
+    for part in ("restoring", "damping", "total"):
+        band = g.force_band(m, x, v, part=part, level=0.9)
+        if part == "restoring":
+            f = jax.vmap(lambda s: s.restoring(x))(samples)
+            want = m.restoring(x)
+        elif part == "damping":
+            f = jax.vmap(lambda s: s.damping(x, v))(samples)
+            want = m.damping(x, v)
+        else:
+            f = jax.vmap(lambda s: s.force(x, v))(samples)
+            want = m.force(x, v)
+        np.testing.assert_allclose(band.mean, want, rtol=1e-12)
+        sd = np.asarray(f).std(axis=0)
+        np.testing.assert_allclose(band.stderr, sd, rtol=0.03)
+        lo, hi = np.quantile(np.asarray(f), [0.05, 0.95], axis=0)
+        np.testing.assert_allclose(band.lower, lo, atol=0.05 * float(np.max(sd)))
+        np.testing.assert_allclose(band.upper, hi, atol=0.05 * float(np.max(sd)))
+    # the analytic variance is phi' Sigma phi
+    phi = np.array([1.0, 0.7, 0.49, 0.343])
+    cov = np.asarray(m.covariance)[0][:4, :4]
+    np.testing.assert_allclose(g.force_band(m, x).stderr[0], np.sqrt(phi @ cov @ phi), rtol=1e-12)
+
+
+def test_band_under_jit_vmap_and_grad():
+    m = _model()
+    xs = jnp.stack([jnp.linspace(-1.5, 1.5, 9), jnp.linspace(-1.0, 1.0, 9)], axis=1)
+    vs = jnp.ones_like(xs) * 0.3
+    eager = jax.vmap(lambda x, v: g.force_band(m, x, v, part="total"))(xs, vs)
+    jitted = eqx.filter_jit(jax.vmap(lambda mm, x, v: g.force_band(mm, x, v, part="total"), (None, 0, 0)))(m, xs, vs)
+    np.testing.assert_allclose(eager.upper, jitted.upper, rtol=1e-12)
+    assert eager.upper.shape == (9, 2)
+    # a new level does not recompile (traced)
+    f = eqx.filter_jit(eqx.debug.assert_max_traces(lambda mm, lev: g.force_band(mm, xs[0], level=lev).upper,
+                                                   max_traces=1))
+    assert np.all(f(m, jnp.asarray(0.99)) > f(m, jnp.asarray(0.9)))
+    # gradient of the upper bound in x against central differences (also at x = 0)
+    for x0 in (jnp.array([0.4, -0.3]), jnp.array([0.0, 0.0])):
+        grad = jax.grad(lambda x: jnp.sum(g.force_band(m, x, vs[0], part="total").upper))(x0)
+        eps = 1e-6
+        fd = [(jnp.sum(g.force_band(m, x0.at[k].add(eps), vs[0], part="total").upper)
+               - jnp.sum(g.force_band(m, x0.at[k].add(-eps), vs[0], part="total").upper)) / (2 * eps) for k in range(2)]
+        np.testing.assert_allclose(grad, fd, rtol=1e-5, atol=1e-7)
+    # samples map under vmap and jit alike
+    samples = g.sample_models(m, jax.random.key(0), 8)
+    out = eqx.filter_jit(jax.vmap(lambda s: s.force(xs[1], vs[1])))(samples)
+    assert out.shape == (8, 2) and np.all(np.isfinite(out))
+    one = jax.tree.map(lambda a: a[3] if eqx.is_array(a) else a, samples)
+    np.testing.assert_allclose(out[3], one.force(xs[1], vs[1]), rtol=1e-12)
+    assert samples.covariance is None and samples.stderr is None
+
+
+def test_coefficients_without_variance_are_not_sampled():
+    m = _model()
+    samples = g.sample_models(m, jax.random.key(2), 50)
+    # stiffness order 2 has zero variance: every sample keeps it exactly
+    np.testing.assert_array_equal(np.asarray(samples.stiffness)[:, :, 2], 0.0)
+    assert np.std(np.asarray(samples.stiffness)[:, 0, 3]) > 0
+
+
+def test_model_file_round_trip_and_old_files(tmp_path):
+    m = _model("chain")
+    path = tmp_path / "m.json"
+    g.save_model(m, path)
+    d = json.loads(path.read_text())
+    assert d["format"] == "gmr-model/1" and len(d["covariance"]) == 2
+    back = g.load_model(path)
+    assert back.covariance is not None
+    idx_m, idx_b = coefficient_index(m), coefficient_index(back)
+    for i in range(2):
+        for a, ka in enumerate(idx_m):
+            for b, kb in enumerate(idx_m):
+                want = float(np.asarray(m.covariance)[i, a, b])
+                got = (float(np.asarray(back.covariance)[i, idx_b.index(ka), idx_b.index(kb)])
+                       if ka in idx_b and kb in idx_b else 0.0)
+                assert got == want
+    x = jnp.array([0.3, 1.1])
+    np.testing.assert_allclose(g.force_band(back, x).upper, g.force_band(m, x).upper, rtol=1e-14)
+    # an old file (no covariance key) still loads, with covariance None; a reader that knows
+    # nothing of the key gets the same terms
+    del d["covariance"]
+    old = g.load_model(d)
+    assert old.covariance is None
+    np.testing.assert_array_equal(coefficients(old), coefficients(back)[..., : coefficients(old).shape[-1]]
+                                  if coefficients(old).shape == coefficients(back).shape else coefficients(old))
+    with pytest.raises(g.GMRInputError, match="no covariance"):
+        g.force_band(old, x)
+    with pytest.raises(g.GMRInputError, match="no covariance"):
+        g.sample_models(old, jax.random.key(0), 3)
+
+
+@pytest.mark.parametrize("bad,match", [
+    ("nope", "must be a list"),
+    ([{"dof": 0, "terms": [["stiffness", 1]]}], "exactly the keys"),
+    ([{"dof": 5, "terms": [["stiffness", 1]], "matrix": [[1.0]]}], "outside"),
+    ([{"dof": 0, "terms": [["spring", 1]], "matrix": [[1.0]]}], "physics one of"),
+    ([{"dof": 0, "terms": [["stiffness", 1]], "matrix": [[1.0, 0.0]]}], "shape"),
+    ([{"dof": 0, "terms": [["stiffness", 1]], "matrix": [[-1.0]]}], "negative variance"),
+    ([{"dof": 0, "terms": [["stiffness", 1], ["stiffness", 3]], "matrix": [[1.0, 0.5], [0.2, 1.0]]}], "symmetric"),
+    ([{"dof": 0, "terms": [["stiffness", 1], ["stiffness", 1]], "matrix": [[1.0, 0.0], [0.0, 1.0]]}], "twice"),
+])
+def test_bad_covariance_in_a_file_is_named(tmp_path, bad, match):
+    d = {"format": "gmr-model/1", "topology": "independent", "masses": [1.0],
+         "terms": [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": 1.0}], "covariance": bad}
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(d))
+    with pytest.raises(g.GMRInputError, match=match):
+        g.load_model(path)
+
+
+def test_bad_band_arguments():
+    m = _model()
+    with pytest.raises(g.GMRInputError, match="part must be"):
+        g.force_band(m, jnp.zeros(2), part="inertia")
+    with pytest.raises(g.GMRInputError, match="needs the velocities"):
+        g.force_band(m, jnp.zeros(2), part="damping")
+    with pytest.raises(g.GMRInputError, match="n must be"):
+        g.sample_models(m, jax.random.key(0), 0)
+
+
+def _hermite_fits():
+    """Two wells of a non-polynomial truth F = sinh(2 x) - 3 x with exact local Taylor
+    coefficients to order 2 (noise-free: the covariance is the discrepancy alone)."""
+    lib = g.Library(3, 1)
+    f = lambda x: np.sinh(2 * x) - 3 * x  # noqa: E731
+    d1 = lambda x: 2 * np.cosh(2 * x) - 3  # noqa: E731
+    d2 = lambda x: 4 * np.sinh(2 * x)  # noqa: E731
+    from scipy.optimize import brentq
+
+    x1 = brentq(f, 0.3, 2.0)
+    eq = np.array([-x1, x1])
+    coef = np.zeros((2, lib.n_terms))
+    names = lib.terms()
+    for w, x in enumerate(eq):
+        for k, val in ((0, f(x)), (1, d1(x)), (2, d2(x) / 2)):
+            coef[w, names.index(("stiffness", k))] = val
+        coef[w, names.index(("velocity_damping", 1))] = 0.1
+    cov = np.zeros((2, lib.n_terms, lib.n_terms))
+    return lib, eq, coef, cov, f
+
+
+def test_discrepancy_widens_between_wells_and_covers_a_non_polynomial_truth():
+    lib, eq, coef, cov, f = _hermite_fits()
+    fits = g.LocalFit(equilibrium=jnp.asarray(eq), coef=jnp.asarray(coef), covariance=jnp.asarray(cov),
+                      threshold=jnp.zeros(2), rss=jnp.zeros(2), n_samples=jnp.ones(2))
+    sol = g.coordinate(fits, lib, method="hermite")
+    calibrated = calibrate_covariance(fits, lib, np.asarray(sol.aux), method="hermite")
+    stiff = np.asarray(sol.value.stiffness)
+    ns = stiff.shape[0]
+    xs = np.linspace(eq[0], eq[1], 201)
+    phi = xs[:, None] ** np.arange(ns)[None, :]
+    se = np.sqrt(np.einsum("xp,pq,xq->x", phi, calibrated[:ns, :ns], phi))
+    err = np.abs(phi @ stiff - f(xs))
+    assert np.all(np.asarray(sol.aux) == 0)  # noise-free: nothing propagated
+    assert se[100] > 100 * se[1] and max(se[0], se[-1]) < 1e-6 * se[100]  # zero at the wells, wide between
+    assert np.mean(err <= 1.96 * se + 1e-12) >= 0.9
+
+
+def _bistable(var_k1):
+    terms = [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -30.0},
+             {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 1e5},
+             {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.5}]
+    cov = [{"dof": 0, "terms": [["stiffness", 1], ["velocity_damping", 1]], "matrix": [[var_k1, 0.0], [0.0, 1e-4]]}]
+    return g.from_terms([0.05], terms, covariance=cov)
+
+
+def test_basin_probability_on_a_tiny_grid():
+    f, A = jnp.array([0.5, 2.0, 4.0]), jnp.array([0.3, 1.5, 2.5])
+    settings = g.SweepSettings(settle_time=5.0)
+    x_range = [[-0.05, 0.05]]
+    # a tight distribution: every sample ends where the model does
+    m = _bistable(1e-6)
+    sol = g.basin_probability(m, f, A, jax.random.key(0), 3, x_range=x_range, settings=settings)
+    bp = sol.value
+    want = g.basin_map(m, f, A, g.stable_wells(m, x_range), settings=settings).value.config
+    np.testing.assert_array_equal(bp.mean_config, want)
+    np.testing.assert_array_equal(bp.most_likely, want)
+    np.testing.assert_allclose(bp.confidence, 1.0)
+    np.testing.assert_allclose(np.sum(np.asarray(bp.probability), axis=-1), 1.0)
+    assert sol.stats["samples_used"] == 3 and sol.stats["samples_other_wells"] == 0
+    # a wide one: samples whose k1 turns positive have one well and are counted apart; the rest
+    # give probabilities that sum to 1 per point
+    wide = _bistable(30.0**2)
+    sol = g.basin_probability(wide, f, A, jax.random.key(1), 6, x_range=x_range, settings=settings)
+    assert sol.stats["samples_used"] + sol.stats["samples_other_wells"] == 6
+    assert sol.stats["samples_other_wells"] >= 1
+    if sol.stats["samples_used"]:
+        np.testing.assert_allclose(np.sum(np.asarray(sol.value.probability), axis=-1), 1.0)
+    with pytest.raises(g.GMRInputError, match="no covariance"):
+        g.basin_probability(g.from_terms([1.0], [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": 1.0}]),
+                            f, A, jax.random.key(0), 2, x_range=x_range)
+
+
+def test_reconstructed_model_carries_a_calibrated_covariance(tmp_path):
+    s = g.systems.bistable_joint("position_dependent")
+    recs = g.systems.make_recordings(s, np.deg2rad(1.0), snr_db=40.0, seed=1, duration=20.0)
+    m = g.reconstruct(recs, g.Library(5, 5)).value
+    cov = np.asarray(m.covariance)
+    p = coefficients(m).shape[-1]
+    assert cov.shape == (1, p, p)
+    np.testing.assert_allclose(cov, np.swapaxes(cov, 1, 2), rtol=1e-8, atol=1e-12 * np.max(np.abs(cov)))
+    assert np.min(np.linalg.eigvalsh(cov[0])) > -1e-9 * np.max(np.diag(cov[0]))
+    # the 95 % band holds the true restoring force over the interwell span
+    xs = np.linspace(-1.1308, 1.1308, 101)[:, None]
+    band = jax.vmap(lambda x: g.force_band(m, x))(jnp.asarray(xs))
+    truth = np.asarray(jax.vmap(s.truth.restoring)(jnp.asarray(xs)))
+    assert np.mean((truth >= np.asarray(band.lower)) & (truth <= np.asarray(band.upper))) >= 0.9
+    assert float(np.median(np.asarray(band.upper - band.lower))) < 0.1 * float(np.max(np.abs(truth)))  # not vacuous
+    # and survives the model file
+    g.save_model(m, tmp_path / "m.json")
+    back = g.load_model(tmp_path / "m.json")
+    # (the same numbers, summed in another layout: round-off of the cancelling monomials only)
+    np.testing.assert_allclose(jax.vmap(lambda x: g.force_band(back, x).upper)(jnp.asarray(xs)), band.upper,
+                               rtol=1e-9, atol=1e-9 * float(np.max(np.abs(np.asarray(band.upper)))))
+    # the figure draws it
+    fig = g.plots.band_figure(m, 0, truth=s.truth, recordings=recs, path=tmp_path / "band.png")
+    assert (tmp_path / "band.png").stat().st_size > 0 and len(fig.axes) == 2
