@@ -120,7 +120,7 @@ def test_basins_cli(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "stable roots of the restoring polynomial" in printed
     z = np.load(out / "basins.npz")
-    assert z["wells"].shape == (2, 3, 2) and z["config"].shape == (2, 3) and (out / "basins.png").exists()
+    assert z["wells"].shape == (2, 3, 2) and z["config"].shape == (2, 3) and (out / "basins.png").exists() and (out / "basins.pdf").exists()
     assert np.all(z["config"] >= 0)
     # a map with unclassified points: the summary says how many and why, exit 0, map written
     out2 = tmp_path / "b2"

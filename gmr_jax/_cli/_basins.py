@@ -108,6 +108,6 @@ def run(args) -> int:
     comp = _compile_seconds() - compiled_before
     print(f"{n} points in {wall:.1f} s ({n / wall:.0f} trajectories/s); of which compiling {comp:.1f} s"
           + ("" if comp > 0 else " (compiled programs loaded from the cache)"))
-    print(f"wrote {out}/basins.npz and basins.png")
+    print(f"wrote {out}/basins.npz and basins.png (.pdf)")
     stage("done")
     return 0

@@ -1,5 +1,7 @@
 """Basin picture: final configuration over the (f, A) grid, coloured by configuration."""
 
+from pathlib import Path
+
 import matplotlib
 import numpy as np
 from matplotlib.colors import BoundaryNorm, ListedColormap
@@ -30,7 +32,7 @@ def basin_figure(f, A, config, n_dof: int, path=None, title: str = "", *, ax=Non
     the 0-1-1-0-0 style, cell 0 first; dark grey: not settled or failed). A configuration has
     the same colour in every figure of the structure (`config_colour`), so maps side by side
     (model vs truth) compare by eye. Draws into `ax` when given (a notebook's own layout), else
-    a new figure. Saved to `path` when given; returns the matplotlib `Figure`."""
+    a new figure. Saved to `path` when given (and as PDF beside it); returns the `Figure`."""
     config = np.asarray(config)
     values = sorted(set(config.ravel().tolist()))
     index = {v: k for k, v in enumerate(values)}
@@ -50,6 +52,8 @@ def basin_figure(f, A, config, n_dof: int, path=None, title: str = "", *, ax=Non
     ax.set_xlabel("actuation frequency f [Hz]")
     ax.set_ylabel("actuation amplitude A")
     ax.set_title(title or "deployment basins (tip half-sine, Eq. 25)")
-    if path is not None:
+    if path is not None:  # PNG (or the suffix given) and a PDF beside it
         fig.savefig(path, dpi=110)
+        if Path(path).suffix.lower() != ".pdf":
+            fig.savefig(Path(path).with_suffix(".pdf"))
     return fig

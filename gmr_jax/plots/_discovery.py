@@ -8,9 +8,14 @@ from matplotlib.figure import Figure
 from .._discover._report import _cell
 
 
+def _save(fig, png: Path) -> None:
+    fig.savefig(png, dpi=110)
+    fig.savefig(png.with_suffix(".pdf"))
+
+
 def discovery_figures(report, out_dir) -> list[str]:
     """Residual maps on the (x, v) plane per cell (before/after), residual vs time and its
-    spectrum, and the holdout before/after. Returns the file names written."""
+    spectrum, and the holdout before/after, each as PNG and PDF. Returns the PNG names."""
     from scipy.signal import welch
 
     out = Path(out_dir)
@@ -30,9 +35,9 @@ def discovery_figures(report, out_dir) -> list[str]:
             ax.set_title(f"{_cell(report, i)}: mean residual force, {key}")
             ax.set_xlabel("x")
             ax.set_ylabel("v")
-            fig.colorbar(im, ax=ax)
+            fig.colorbar(im, ax=ax, label="mean residual force (recording's force units)")
     fig.tight_layout()
-    fig.savefig(out / "residual_map.png", dpi=110)
+    _save(fig, out / "residual_map.png")
     names.append("residual_map.png")
 
     s = report.series
@@ -53,7 +58,7 @@ def discovery_figures(report, out_dir) -> list[str]:
         axes[i, 1].set_ylabel("residual PSD")
         axes[i, 1].set_title(_cell(report, i))
     fig.tight_layout()
-    fig.savefig(out / "residual_time_frequency.png", dpi=110)
+    _save(fig, out / "residual_time_frequency.png")
     names.append("residual_time_frequency.png")
 
     sims_b, sims_a = s.get("sims", (None, None))
@@ -86,6 +91,6 @@ def discovery_figures(report, out_dir) -> list[str]:
             ax.legend(fontsize=8)
         axes[-1, 0].set_xlabel("t (s)")
         fig.tight_layout()
-        fig.savefig(out / "holdout_before_after.png", dpi=110)
+        _save(fig, out / "holdout_before_after.png")
         names.append("holdout_before_after.png")
     return names

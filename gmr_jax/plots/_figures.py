@@ -43,7 +43,7 @@ def case_figure(system, models: dict, recordings, path=None, dof: int = 0, title
         ax.set_xlabel(system.units[0])
         ax.set_ylabel(system.units[1])
         ax.set_title(f"{name}: log10|F_d error|")
-        fig.colorbar(im, ax=ax)
+        fig.colorbar(im, ax=ax, label=f"log10 |F_d error| ({system.units[2]})")
     if title:
         fig.suptitle(title)
     if path is not None:
