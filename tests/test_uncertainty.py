@@ -254,3 +254,16 @@ def test_reconstructed_model_carries_a_calibrated_covariance(tmp_path):
     # the figure draws it
     fig = g.plots.band_figure(m, 0, truth=s.truth, recordings=recs, path=tmp_path / "band.png")
     assert (tmp_path / "band.png").stat().st_size > 0 and len(fig.axes) == 2
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("index", [1, 7, 15])  # joint 40 dB, NES 30 dB, shallow arch 40 dB
+def test_coverage_study_cases_meet_the_target(index):
+    """A reduced `studies/coverage.py`: the 95 % band covers the true restoring force on >= 90 %
+    of the interwell span, with a band narrower than half the force scale (not vacuous)."""
+    from studies.coverage import CASES, TARGET, run_case
+
+    rows, _, _ = run_case(*CASES[index])
+    for r in rows:
+        assert r["cover_span"] >= TARGET, r
+        assert r["width"] < 0.5, r
