@@ -37,6 +37,7 @@ def test_fit_figure_panels_and_residuals(tmp_path):
 
     fig = gmr.plots.fit_figure(model, recs, tmp_path / "f.png", band=band, title="chain")
     assert (tmp_path / "f.png").stat().st_size > 10_000
+    assert gmr.plots.fit_figure(model, recs, band="auto") is not None  # from_terms: no covariance, no band
     axes = fig.axes
     assert len(axes) == 6 and calls and calls[0][1] == 2
     # data ranges shaded per recording on each restoring panel, equilibria marked
@@ -45,7 +46,7 @@ def test_fit_figure_panels_and_residuals(tmp_path):
         spans = [p for p in ax_r.patches]
         assert len(spans) >= 2
         labels = [t.get_text() for t in ax_r.get_legend().get_texts()]
-        assert "95 % band" in labels and "S1: data range" in labels
+        assert any(lab.startswith("95 % band (half-width <= 1") for lab in labels) and "S1: data range" in labels
         # residual legend carries the NRMSE of the force (noise-only residual: small)
         res_labels = [t.get_text() for t in axes[3 * i + 2].get_legend().get_texts()]
         nrmse = [float(s.rsplit(" ", 1)[1]) for s in res_labels]

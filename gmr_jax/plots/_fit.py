@@ -32,8 +32,21 @@ def _forces(model, x, v):
     return (np.asarray(jax.vmap(model.restoring)(x)), np.asarray(jax.vmap(model.damping)(x, v)))
 
 
+def _model_band(model):
+    """x (n, dof) -> (lower, upper) of the 95 % band of F_r from the model's covariance
+    (`force_band`), one jitted program; None when the model has no covariance."""
+    if getattr(model, "covariance", None) is None:
+        return None
+    import jax
+
+    from .._model._uncertainty import force_band
+
+    lower_upper = jax.jit(jax.vmap(lambda x: (lambda b: (b.lower, b.upper))(force_band(model, x))))
+    return lambda X: tuple(np.asarray(a) for a in lower_upper(np.asarray(X, float)))
+
+
 def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "x", force_unit: str = "force",
-               band=None) -> Figure:
+               band="auto") -> Figure:
     """The fitted model against its training recordings, one row per DOF (cell):
 
     - restoring force F_r(x) over the data's span and a quarter of it beyond, with the
@@ -45,10 +58,12 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
       model's F(x, v), against time, with its NRMSE per recording.
 
     `recordings`: the `Recording`s the model was fitted on (v and a are estimated where
-    missing, as `reconstruct` does). `band`: optional callable `x (n,) -> (lower, upper)` of
-    shape (n, dof) drawn around F_r (an uncertainty band). Saved (PNG, or PDF by suffix) to
+    missing, as `reconstruct` does). `band`: "auto" (default) draws the model's 95 % band of
+    F_r (`force_band`) when it carries a covariance (`reconstruct` sets one); None draws none;
+    or a callable `x (n, dof) -> (lower, upper)`, each (n, dof). Saved (PNG, or PDF by suffix) to
     `path` when given; returns the matplotlib `Figure`."""
     recs = [r.complete(model.topology) for r in recordings]
+    band = _model_band(model) if isinstance(band, str) and band == "auto" else band
     masses = np.asarray(model.masses, float)
     d = model.n_dof
     height = 3.0 * d + 0.7
@@ -68,7 +83,8 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
         ax_r.plot(xs, fr, "k-", lw=1.8, label="model F_r")
         if band is not None:
             blo, bhi = (np.asarray(b)[:, i] for b in band(X))
-            ax_r.fill_between(xs, blo, bhi, color="0.6", alpha=0.4, lw=0, label="95 % band")
+            half = 0.5 * float(np.max(bhi - blo))
+            ax_r.fill_between(xs, blo, bhi, color="0.6", alpha=0.4, lw=0, label=f"95 % band (half-width <= {half:.2g})")
         for k, r in enumerate(recs):
             col = COLOURS[k % len(COLOURS)]
             ax_r.axvspan(float(np.min(r.x[:, i])), float(np.max(r.x[:, i])), color=col, alpha=0.25, lw=0,
