@@ -117,3 +117,22 @@ def test_show_prints_the_stored_resolution(tmp_path, capsys, nominal):
     out = capsys.readouterr().out
     assert "What each well's data resolved" in out and "F'' ok" in out
     assert "  resolution: " not in out  # shown as its own section, not as an unknown key
+
+
+@pytest.mark.slow
+def test_reduced_stress_set():
+    """A reduced `studies/stress_cases.py` (the shallow arch, x v a, 30 dB, float32 time stamps, 0.45 %
+    of the interwell distance): defaults give no spurious well, no diverging free or forced run, a
+    restoring error within 2x of the curvature oracle's; the unresolved curvature is warned."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "studies"))
+    import stress_cases as sc
+
+    case = sc.Case("arch_xva_f32", "arch", "xva", True)
+    row = sc.evaluate(case, sc.base_amplitude(case.make_system(), case.ratio), 0)
+    assert all(0.002 <= r <= 0.005 for r in row["ratios"]), row["ratios"]
+    assert row["pass"]["wells"] and row["pass"]["divergence"], row
+    assert row["pass"]["error"], row["dofs"]
+    assert row["warned"] and row["resolution"].missing()

@@ -1,0 +1,374 @@
+"""Issue 15: synthetic stress cases with the defaults, against the curvature oracle.
+
+Non-polynomial cells (the shallow arch / von Mises truss, the magnetic bistable, the truss cells
+of a 3-cell Kresling chain) excited by a base sweep at 0.2-0.5 % of their interwell distance,
+30 dB noise on every channel, float32 time stamps (cast to float32 and back, as a lab file
+stores them) and partial sensors (displacement only, velocity only with the equilibrium given,
+a chain without its velocity channels). Each case is reconstructed with `gmr.reconstruct`
+defaults and judged by
+
+- spurious wells: stable equilibria of the fitted restoring force within one box-span of the
+  metrics box, against the truth's (count);
+- divergence: free runs of the fitted model from a grid of initial states over the metrics box
+  (x and v, where the errors and basin maps are measured), unforced, 20 slowest natural periods,
+  and under the training input from every equilibrium; a run that fails or leaves the box
+  widened by two spans on either side is diverged;
+- restoring error (relative L2 over the metrics box) against the curvature oracle's: the
+  Hermite interpolant of each well's exact F, F', F'' (target: within 2x);
+- whether the failures are warned (`GMRDataWarning`), and the per-well resolution table
+  (`stats["resolution"]`, `gmr_jax._reconstruct._resolution`);
+- the excitation advice checked: where a needed term is unresolved, the case is re-recorded
+  with the base amplitude scaled to the advised one, and (separately) at the original amplitude
+  with the advised SNR, and refitted.
+
+    python studies/stress_cases.py [--cases arch_xva,magnet_xva_f32,...] [--seeds 1]
+        [--out results/stress_cases.md]
+    python studies/stress_cases.py --sweep arch    # the bound calibration table (F'' bound vs error)
+"""
+
+import argparse
+import time
+import warnings
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import gmr_jax as g
+
+SNR = 30.0
+TARGET_RATIO = 0.0045  # the most excited well of each case at 0.45 % of its interwell distance
+
+
+@dataclass(frozen=True)
+class Case:
+    name: str
+    system: str  # "arch", "magnet", "kresling3"
+    sensing: str  # "xva", "x", "v", "xa"
+    float32_time: bool = False
+    ratio: float = TARGET_RATIO
+
+    def make_system(self):
+        return {"arch": g.systems.shallow_arch, "magnet": g.systems.magnetic_bistable,
+                "kresling3": g.systems.kresling3}[self.system]()
+
+
+CASES = {c.name: c for c in (
+    Case("arch_xva", "arch", "xva"),
+    Case("magnet_xva_f32", "magnet", "xva", True),
+    Case("arch_x", "arch", "x"),
+    Case("arch_v_f32", "arch", "v", True),
+    Case("magnet_x", "magnet", "x"),
+    Case("kresling3_xa_f32", "kresling3", "xa", True),
+)}
+
+
+# --- data -------------------------------------------------------------------------------------
+
+
+def response_ratios(system, amplitude: float) -> np.ndarray:
+    """(wells, dof) vibration amplitude / interwell distance of noise-free sweeps at `amplitude`."""
+    recs = g.systems.make_recordings(system, amplitude, snr_db=None)
+    eq = np.asarray(system.equilibria, float)
+    dist = np.abs(eq[1:] - eq[:-1]).min(axis=0) if eq.shape[0] > 1 else np.ones(eq.shape[1])
+    return np.array([[np.percentile(np.abs(r.x[:, i] - r.x[:, i].mean()), 99.9) / dist[i]
+                      for i in range(eq.shape[1])] for r in recs])
+
+
+def base_amplitude(system, ratio: float) -> float:
+    """The base amplitude that puts the most excited well at `ratio` (the response is linear
+    in the base amplitude at these small vibrations; probed at 1e-4 of the interwell scale)."""
+    eq = np.asarray(system.equilibria, float)
+    probe = 1e-3 * float(np.ptp(eq))
+    return probe * ratio / float(response_ratios(system, probe).max())
+
+
+def recordings(case: Case, amplitude: float, seed: int, snr: float = SNR):
+    s = case.make_system()
+    recs = g.systems.make_recordings(s, amplitude, snr_db=snr, seed=seed)
+    out = []
+    for k, r in enumerate(recs):
+        t = r.t.astype(np.float32).astype(np.float64) if case.float32_time else r.t
+        common = dict(t=t, base_acc=r.base_acc, masses=r.masses, name=r.name)
+        if case.sensing == "xva":
+            out.append(g.Recording(x=r.x, v=r.v, a=r.a, **common))
+        elif case.sensing == "x":
+            out.append(g.Recording(x=r.x, **common))
+        elif case.sensing == "xa":
+            out.append(g.Recording(x=r.x, a=r.a, **common))
+        elif case.sensing == "v":
+            out.append(g.Recording(v=r.v, equilibrium=np.asarray(s.equilibria[k], float), **common))
+    return out
+
+
+# --- the curvature oracle -----------------------------------------------------------------------
+
+
+def oracle_stiffness(system, dof: int, order: int = 2) -> np.ndarray:
+    """Ascending coefficients of the Hermite interpolant of the truth's exact Taylor
+    coefficients F^(k)(x_i) / k!, k = 0..`order`, at every well of `dof` (the other cells at 0;
+    the built-in cells' restoring forces depend on their own deformation only)."""
+    d = system.truth.n_dof
+
+    def f(x):
+        return system.truth.restoring(jnp.zeros(d).at[dof].set(x))[dof]
+
+    nodes = np.asarray(system.equilibria[:, dof], float)
+    taylor, fk = [], f
+    for k in range(order + 1):
+        taylor.append([float(fk(x)) / float(np.prod(np.arange(1, k + 1))) for x in nodes])
+        fk = jax.grad(fk)
+    taylor = np.array(taylor).T
+    coef, degree, _ = g.hermite_interpolate(jnp.asarray(nodes), jnp.asarray(taylor),
+                                            jnp.full(nodes.size, order))
+    return np.asarray(coef)[: int(degree) + 1]
+
+
+def oracle_error(system, dof: int, order: int = 2) -> float:
+    xs = np.linspace(*system.x_range[dof], 401)
+    d = system.truth.n_dof
+    truth = np.asarray(jax.vmap(lambda x: system.truth.restoring(jnp.zeros(d).at[dof].set(x))[dof])(jnp.asarray(xs)))
+    fit = np.polynomial.polynomial.polyval(xs, oracle_stiffness(system, dof, order))
+    return float(np.linalg.norm(fit - truth) / np.linalg.norm(truth))
+
+
+# --- criteria ---------------------------------------------------------------------------------
+
+
+def well_counts(model, system, dof: int) -> tuple[int, int]:
+    """Stable equilibria of the fitted and the true restoring force of `dof` within one span of the box."""
+    lo, hi = system.x_range[dof]
+    rng = (lo - (hi - lo), hi + (hi - lo))
+    fit = sum(s for _, s in g.metrics.equilibria(model, dof, rng))
+    true = sum(s for _, s in g.metrics.equilibria(system.truth, dof, rng))
+    return int(fit), int(true)
+
+
+def natural_period(system) -> float:
+    """The slowest linear period at the wells (single DOF: per well; chain: the base cell with all masses)."""
+    m = float(np.sum(np.asarray(system.truth.masses)))
+    ks = []
+    for i in range(system.equilibria.shape[0]):
+        x0 = jnp.asarray(system.equilibria[i], float)
+        ks.append(float(jax.jacfwd(system.truth.restoring)(x0)[0, 0]))
+    return float(2 * np.pi * np.sqrt(m / max(min(ks), 1e-12)))
+
+
+def divergence(model, system, amplitude: float, seed: int = 0) -> dict:
+    """Free runs from initial states over the metrics box, and runs under the training sweep."""
+    d = system.truth.n_dof
+    lo, hi = system.x_range[:, 0], system.x_range[:, 1]
+    span = hi - lo
+    box = (jnp.asarray(lo - 2 * span), jnp.asarray(hi + 2 * span))
+    if d == 1:
+        xg, vg = np.meshgrid(np.linspace(lo[0], hi[0], 9), np.linspace(*system.v_range[0], 5))
+        x0s, v0s = xg.reshape(-1, 1), vg.reshape(-1, 1)
+    else:
+        rng = np.random.default_rng(seed)
+        x0s = lo + span * rng.random((24, d))
+        v0s = system.v_range[:, 0] + np.ptp(system.v_range, axis=1) * rng.random((24, d))
+    duration = 20 * natural_period(system)
+    ts = jnp.linspace(0.0, duration, 2001)
+    free = jax.vmap(lambda x0, v0: g.simulate(model, g.NoInput(d), ts, x0, v0, box=box, throw=False))(
+        jnp.asarray(x0s), jnp.asarray(v0s))
+    ok_free = (np.asarray(free.result._value) == g.RESULTS.successful._value) & np.all(
+        np.isfinite(np.asarray(free.value[0])), axis=(1, 2))
+    ts_tr = jnp.arange(int(round(system.duration * system.fs)) + 1) / system.fs
+    exc = g.BaseChirp(jnp.asarray(amplitude, float), system.sweep[0], system.sweep[1], system.duration, n_dof=d)
+    forced = jax.vmap(lambda x0: g.simulate(model, exc, ts_tr, x0, box=box, throw=False))(
+        jnp.asarray(system.equilibria, float))
+    ok_forced = (np.asarray(forced.result._value) == g.RESULTS.successful._value) & np.all(
+        np.isfinite(np.asarray(forced.value[0])), axis=(1, 2))
+    return {"free": int((~ok_free).sum()), "n_free": int(ok_free.size),
+            "forced": int((~ok_forced).sum()), "n_forced": int(ok_forced.size)}
+
+
+def evaluate(case: Case, amplitude: float, seed: int, snr: float = SNR) -> dict:
+    system = case.make_system()
+    recs = recordings(case, amplitude, seed, snr)
+    t0 = time.time()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            sol = g.reconstruct(recs, throw=False)
+        except g.GMRInputError as e:
+            return {"case": case.name, "seed": seed, "amplitude": amplitude, "snr": snr, "refused": str(e)}
+    secs = time.time() - t0
+    data_warnings = [str(w.message) for w in caught if issubclass(w.category, g.GMRDataWarning)]
+    model = sol.value
+    d = system.truth.n_dof
+    res = sol.stats["resolution"]
+    row = {"case": case.name, "seed": seed, "amplitude": amplitude, "snr": snr, "secs": secs, "result": g.RESULTS[sol.result] or "successful",
+           "warnings": data_warnings, "resolution": res, "routes": [r.stats.get("coordination") for r in sol.stats["dofs"]],
+           "ratios": [w.ratio for w in res.wells], "dofs": []}
+    div = divergence(model, system, amplitude, seed)
+    row["divergence"] = div
+    for i in range(d):
+        fit_w, true_w = well_counts(model, system, i)
+        err = g.metrics.restoring_error(model, system.truth, i, system.x_range[i])
+        orc = oracle_error(system, i)
+        row["dofs"].append({"wells": fit_w, "true_wells": true_w, "error": err, "oracle": orc,
+                            "oracle_vs": oracle_error(system, i, 1), "ratio": err / orc})
+    row["pass"] = {
+        "wells": all(x["wells"] <= x["true_wells"] for x in row["dofs"]),
+        "divergence": div["free"] == 0 and div["forced"] == 0,
+        "error": all(x["ratio"] <= 2.0 for x in row["dofs"]),
+    }
+    row["warned"] = bool(data_warnings)
+    return row
+
+
+def advised_snr(row: dict) -> float | None:
+    """The SNR at which every needed term would be resolved at the same amplitude (20 log10 rho dB more)."""
+    rhos = [t.rho for _, t in row["resolution"].missing()]
+    return row["snr"] + 20 * np.log10(max(rhos)) if rhos else None
+
+
+def advised_amplitude(row: dict) -> float | None:
+    """The base amplitude at which every needed term would be resolved (the report's advice,
+    scaled by the largest advised / current amplitude ratio), None when nothing is missing."""
+    res = row["resolution"]
+    factors = [t.advised_ratio / w.ratio for w, t in res.missing() if t.advised_ratio is not None]
+    if not res.missing():
+        return None
+    if not factors:
+        return None
+    return row["amplitude"] * max(factors)
+
+
+# --- report -----------------------------------------------------------------------------------
+
+
+def _pct(x):
+    return f"{100 * x:.3g} %"
+
+
+def describe(row: dict, header: str) -> list[str]:
+    if "refused" in row:
+        return [f"### {header}", "", f"Base amplitude {row['amplitude']:.3g}, {row['snr']:.3g} dB: refused "
+                f"(`GMRInputError`): {row['refused']}", ""]
+    p = row["pass"]
+    div = row["divergence"]
+    out = [f"### {header}", "",
+           f"Base amplitude {row['amplitude']:.3g}, {row['snr']:.3g} dB; amplitude ratios per well "
+           f"{', '.join(f'{100 * r:.2g} %' for r in row['ratios'])}; coordination {', '.join(map(str, row['routes']))}; "
+           f"{row['secs']:.0f} s; result {row['result']}.", "",
+           "| DOF | wells fitted / true | restoring error | curvature oracle | ratio (target <= 2) | value+slope oracle |",
+           "|---|---|---|---|---|---|"]
+    for i, x in enumerate(row["dofs"]):
+        out.append(f"| {i} | {x['wells']} / {x['true_wells']} | {_pct(x['error'])} | {_pct(x['oracle'])} | "
+                   f"{x['ratio']:.2f} | {_pct(x['oracle_vs'])} |")
+    out += ["", f"Divergence: {div['free']} of {div['n_free']} free runs, {div['forced']} of {div['n_forced']} runs "
+            f"under the training sweep. Criteria: spurious wells {'pass' if p['wells'] else 'FAIL'}, divergence "
+            f"{'pass' if p['divergence'] else 'FAIL'}, error within 2x of the oracle {'pass' if p['error'] else 'FAIL'}; "
+            f"GMRDataWarnings: {len(row['warnings'])}.", ""]
+    if row["warnings"]:
+        out += [f"- warning: {w[:400]}{'...' if len(w) > 400 else ''}" for w in row["warnings"]] + [""]
+    out += ["Per-well resolution (`stats[\"resolution\"]`):", "", str(row["resolution"]), ""]
+    return out
+
+
+def sweep(system_name: str, seeds: int) -> list[str]:
+    """Bound calibration: F'' bound of the resolution report vs restoring error, by amplitude."""
+    case = Case(f"{system_name}_xva", system_name, "xva")
+    s = case.make_system()
+    lines = [f"### Calibration: {system_name}, x v a at {SNR:g} dB, by amplitude", "",
+             f"Curvature oracle {_pct(oracle_error(s, 0))}. Columns: the most excited well's amplitude ratio, the "
+             "largest F'' bound over the wells (two noise-limited standard errors of F''/2 carried through the "
+             "interpolant of F, F', F'' at the wells: RMS over the span, % of the force's RMS), "
+             "the restoring error and its ratio to the oracle, F'' resolved at every well (bound <= "
+             f"{100 * g.ResolutionReport.bound:g} %).",
+             "", "| ratio | seed | F'' bound | restoring error | / oracle | F'' resolved everywhere |", "|---|---|---|---|---|---|"]
+    for ratio in (0.002, 0.0035, 0.005, 0.01, 0.02, 0.04):
+        amp = base_amplitude(s, ratio)
+        for seed in range(seeds):
+            recs = recordings(case, amp, seed)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                sol = g.reconstruct(recs, throw=False)
+            res = sol.stats["resolution"]
+            b2 = [w.terms[2] for w in res.wells]
+            bound = max(t.impact for t in b2)
+            err = g.metrics.restoring_error(sol.value, s.truth, 0, s.x_range[0])
+            lines.append(f"| {_pct(ratio)} | {seed} | {_pct(bound)} | {_pct(err)} | {err / oracle_error(s, 0):.2f} | "
+                         f"{all(t.resolved for t in b2)} |")
+            print(lines[-1], flush=True)
+    return lines
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cases", default=",".join(CASES))
+    ap.add_argument("--seeds", type=int, default=1)
+    ap.add_argument("--sweep", default=None, help="bound calibration on this system (arch, magnet) instead")
+    ap.add_argument("--no-advice-check", action="store_true")
+    ap.add_argument("--out", default="results/stress_cases.md")
+    args = ap.parse_args()
+    if args.sweep:
+        print("\n".join(sweep(args.sweep, args.seeds)))
+        return
+    t_start = time.time()
+    body, summary = [], []
+    for name in args.cases.split(","):
+        case = CASES[name]
+        amp = base_amplitude(case.make_system(), case.ratio)
+        for seed in range(args.seeds):
+            row = evaluate(case, amp, seed)
+            body += describe(row, f"{name}, seed {seed}")
+            adv = None if args.no_advice_check else advised_amplitude(row)
+            after = evaluate(case, adv, seed) if adv is not None else None
+            if after is not None:
+                body += describe(after, f"{name}, seed {seed}, re-recorded at the advised amplitude")
+            snr = None if args.no_advice_check else advised_snr(row)
+            louder = evaluate(case, amp, seed, snr) if snr is not None else None
+            if louder is not None:
+                body += describe(louder, f"{name}, seed {seed}, re-recorded at the advised SNR")
+            summary.append((row, after, louder))
+            print("\n".join(describe(row, name)[:12]), flush=True)
+    write(args, summary, body, time.time() - t_start)
+
+
+def write(args, summary, body, secs):
+    lines = ["# Stress cases (issue 15)", "",
+             f"`python studies/stress_cases.py --seeds {args.seeds}"
+             + (f" --cases {args.cases}" if args.cases != ",".join(CASES) else "")
+             + f"` ({secs / 60:.1f} min on the shared 2-core dev machine).", "",
+             __doc__.split("\n\n    python")[0].split("\n\n", 1)[1], "",
+             "| case | seed | amplitude ratios | spurious wells | diverged (free / forced) | restoring error / oracle "
+             "(per DOF) | within 2x | warned | resolution: needed and unresolved | at the advised amplitude "
+             "| at the advised SNR (same amplitude) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+
+    def checked(row, after, what):
+        if after is None:
+            return "-"
+        if "refused" in after:
+            return f"{what}: refused ({after['refused'][:90]}...)"
+        errs_a = ", ".join(f"{_pct(x['error'])}" for x in after["dofs"])
+        return (f"{what}: still missing {len(after['resolution'].missing())}; error {errs_a}; within 2x "
+                f"{'yes' if after['pass']['error'] else 'no'}; diverged {after['divergence']['free']}+"
+                f"{after['divergence']['forced']}; warnings {len(after['warnings'])}")
+
+    for row, after, louder in summary:
+        if "refused" in row:
+            lines.append(f"| {row['case']} | {row['seed']} | refused: {row['refused'][:120]} | | | | | | | | |")
+            continue
+        div = row["divergence"]
+        spur = sum(max(0, x["wells"] - x["true_wells"]) for x in row["dofs"])
+        errs = ", ".join(f"{_pct(x['error'])} / {_pct(x['oracle'])}" for x in row["dofs"])
+        miss = "; ".join(f"DOF {w.dof} x={w.equilibrium:.3g}: {t.name}"
+                         for w, t in row["resolution"].missing()) or "-"
+        adv = checked(row, after, f"x{after['amplitude'] / row['amplitude']:.2g} base amplitude" if after else "")
+        snr = checked(row, louder, f"{louder['snr']:.3g} dB" if louder else "")
+        lines.append(f"| {row['case']} | {row['seed']} | {', '.join(f'{100 * r:.2g}' for r in row['ratios'])} % | {spur} | "
+                     f"{div['free']}/{div['n_free']}, {div['forced']}/{div['n_forced']} | {errs} | "
+                     f"{'yes' if row['pass']['error'] else 'NO'} | {len(row['warnings'])} | {miss} | {adv} | {snr} |")
+    lines += ["", "## Per case", ""] + body
+    with open(args.out, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+    print("wrote", args.out)
+
+
+if __name__ == "__main__":
+    main()
