@@ -206,9 +206,11 @@ class ResolutionReport:
                 cells.append(f"{mark} {t.t:.3g} / {100 * t.impact:.2g} %" + ("" if t.needed else " (not needed)"))
             miss = w.missing()
             adv = max((t.advised_ratio for t in miss if t.advised_ratio is not None), default=None)
+            extra = "".join(f" ({t.name}, beyond the oracle: {100 * t.advised_ratio:.2g} %)" for t in w.terms
+                            if not t.needed and not t.resolved and t.advised_ratio is not None)
             lines.append(f"| {w.dof} | {w.equilibrium:.5g} | {100 * w.ratio:.3g} | {w.band[0]:.3g}-{w.band[1]:.3g} | "
                          f"{w.f_natural:.3g} | " + " | ".join(cells) + f" | {', '.join(NAMES[t.order] for t in miss) or '-'}"
-                         f" | {'-' if not miss else ('> %.2g %%' % (100 * MAX_ADVISED_RATIO) if adv is None or adv > MAX_ADVISED_RATIO else '%.2g %%' % (100 * adv))} |")
+                         f" | {'-' if not miss else ('> %.2g %%' % (100 * MAX_ADVISED_RATIO) if adv is None or adv > MAX_ADVISED_RATIO else '%.2g %%' % (100 * adv))}{extra} |")
         return "\n".join(lines)
 
     def __str__(self) -> str:
@@ -216,7 +218,9 @@ class ResolutionReport:
         legend = ("t: |coefficient| / standard error of the local fit (0: dropped); bound: how far two noise-limited "
                   "standard errors of the term move the global restoring force (RMS over the wells' span widened by "
                   f"{100 * BOX_MARGIN:g} % either side), % of its RMS; ok = bound <= {100 * BOUND_FRACTION:g} %; "
-                  "**NO** = needed (F, F', F'') and unresolved.")
+                  "**NO** = needed (F, F', F'') and unresolved; advised amplitude: the response amplitude (% of the "
+                  "interwell distance) at which they would be, and in parentheses F''' where the global model's own "
+                  "F''' moves its force by more than the bound (beyond the curvature oracle).")
         nowhere = self.unresolved_everywhere()
         lines = [self.table(), "", legend]
         if nowhere:
