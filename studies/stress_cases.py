@@ -23,7 +23,8 @@ defaults and judged by
 
     python studies/stress_cases.py [--cases arch_xva,magnet_xva_f32,...] [--seeds 1]
         [--out results/stress_cases.md]
-    python studies/stress_cases.py --sweep arch    # the bound calibration table (F'' bound vs error)
+    python studies/stress_cases.py --sweep arch --out results/stress_cases_sweep.md
+        # the resolution bound against the restoring error, by amplitude
 """
 
 import argparse
@@ -287,10 +288,10 @@ def nominal_kresling5() -> list[str]:
 
 
 def sweep(system_name: str, seeds: int) -> list[str]:
-    """Bound calibration: F'' bound of the resolution report vs restoring error, by amplitude."""
+    """The F'' bound of the resolution report against the restoring error, by amplitude."""
     case = Case(f"{system_name}_xva", system_name, "xva")
     s = case.make_system()
-    lines = [f"### Calibration: {system_name}, x v a at {SNR:g} dB, by amplitude", "",
+    lines = [f"# Resolution bound against restoring error: {system_name}, x v a at {SNR:g} dB, by amplitude", "",
              f"Curvature oracle {_pct(oracle_error(s, 0))}. Columns: the most excited well's amplitude ratio, the "
              "largest F'' bound over the wells (two noise-limited standard errors of F''/2 carried through the "
              "interpolant of F, F', F'' at the wells: RMS over the span, % of the force's RMS), "
@@ -324,7 +325,13 @@ def main():
     ap.add_argument("--out", default="results/stress_cases.md")
     args = ap.parse_args()
     if args.sweep:
-        print("\n".join(sweep(args.sweep, args.seeds)))
+        t0 = time.time()
+        lines = sweep(args.sweep, args.seeds)
+        lines.insert(1, f"\n`python studies/stress_cases.py --sweep {args.sweep} --seeds {args.seeds} --out {args.out}` "
+                        f"({(time.time() - t0) / 60:.1f} min).")
+        with open(args.out, "w") as fh:
+            fh.write("\n".join(lines) + "\n")
+        print("\n".join(lines))
         return
     t_start = time.time()
     body, summary = [], []
