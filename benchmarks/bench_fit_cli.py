@@ -35,7 +35,8 @@ t1 = time.perf_counter()
 for path in sys.argv[1:]:
     d = np.load(path)
     X = np.column_stack([d["x"][:, 0], d["v"][:, 0]])
-    Xd = np.column_stack([d["v"][:, 0], d["a"][:, 0] - d["base_acc"][:, 0] if "base_acc" in d else d["a"][:, 0]])
+    xdd = d["a"][:, 0] - (np.ravel(d["base_acc"]) if "base_acc" in d.files else 0.0)  # relative acceleration
+    Xd = np.column_stack([d["v"][:, 0], xdd])
     m = ps.SINDy(feature_library=ps.PolynomialLibrary(degree=5), optimizer=ps.STLSQ(threshold=0.05))
     m.fit(X, t=float(d["t"][1] - d["t"][0]), x_dot=Xd)
     m.print()

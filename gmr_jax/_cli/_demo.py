@@ -7,9 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from .. import Library, gmc_sindy, reconstruct, save_model
-from ..metrics import damping_error, equilibria, restoring_error
-from ..plots import case_figure
-from ..systems import bistable_joint, make_recordings, tristable_nes
+# metrics, plots (matplotlib) and systems are imported where used: every command imports this
+# module to register `gmr demo`, and `gmr fit` need not pay for them at start-up
 
 
 def register(sub):
@@ -41,6 +40,8 @@ def run(args) -> int:
 def default_cases():
     """(system factory, amplitude, label): bistable joint, both damping models, base sweeps of
     5, 1 and 0.5 degrees; tri-stable NES, base sweep of 0.5 mm."""
+    from ..systems import bistable_joint, tristable_nes
+
     cases = []
     for damping in ("position_independent", "position_dependent"):
         for deg in (5.0, 1.0, 0.5):
@@ -50,6 +51,8 @@ def default_cases():
 
 
 def _equilibria_match(model, truth, x_range, tol):
+    from ..metrics import equilibria
+
     got, want = equilibria(model, 0, x_range), equilibria(truth, 0, x_range)
     if len(got) != len(want):
         return False
@@ -58,6 +61,10 @@ def _equilibria_match(model, truth, x_range, tol):
 
 def run_case(system, amplitude, label, *, snr_db=60.0, seed=0, out: Path | None = None, log=print):
     """Generate the data of one case, reconstruct with GMR and GMC-SINDy, measure both."""
+    from ..metrics import damping_error, restoring_error
+    from ..plots import case_figure
+    from ..systems import make_recordings
+
     t0 = time.perf_counter()
     recs = make_recordings(system, amplitude, snr_db=snr_db, seed=seed)
     t_data = time.perf_counter() - t0
