@@ -48,7 +48,7 @@ def kresling_rows(seeds: int, record) -> list:
             for i in range(system.truth.n_dof):
                 row = {"description": f"{name} cell {i}", "label": f"{amp * 1e3:g} mm", "seed": s,
                        "route": str(sol.stats["dofs"][i].stats.get("coordination", "-")), "secs": time.time() - t0,
-                       "gmr_jax": str(Path(g.__file__).parent),
+                       "gmr_jax": _where(),
                        "amplitude_ratio": float(max(np.percentile(np.abs(r.x[:, i] - r.x[:, i].mean()), 99.9)
                                                     for r in recs) / float(np.ptp(system.equilibria[:, i])))}
                 for meth, model in (("gmr", gmr), ("gmc", gmc)):
@@ -61,6 +61,13 @@ def kresling_rows(seeds: int, record) -> list:
                                                               for r in rows[-system.truth.n_dof:])
                   + f" ({time.time() - t0:.0f} s)", flush=True)
     return rows
+
+
+def _where() -> str:
+    """The folder of the gmr_jax this process imported."""
+    import importlib.util
+
+    return str(Path(importlib.util.find_spec("gmr_jax").origin).parent)
 
 
 def worker(path: str, seeds: int, kresling: bool = False) -> None:
@@ -90,7 +97,7 @@ def worker(path: str, seeds: int, kresling: bool = False) -> None:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 row = pc.run_case(factory(), amp, label, seed=s)
-            row |= {"route": routes[-1], "label": label, "seed": s, "secs": time.time() - t0, "gmr_jax": str(Path(g.__file__).parent)}
+            row |= {"route": routes[-1], "label": label, "seed": s, "secs": time.time() - t0, "gmr_jax": _where()}
             rows.append(row)
             print(f"{row['description'][:40]:40s} {label:7s} seed {s} GMR {100 * row['gmr']['restoring_error']:.4g} % "
                   f"GMC {100 * row['gmc']['restoring_error']:.4g} % ({row['secs']:.0f} s)", flush=True)
