@@ -39,6 +39,7 @@ def test_fit_hand_made_csv(joint_files, tmp_path, capsys):
     assert "estimated from x" in printed and "F_0(x, v)" in printed
     # the stored standard errors are printed, term by term, and agree with the file
     assert "std. error" in printed
+    assert "What each well's data resolved" in printed and "resolution" in json.loads(out.read_text())
     x3 = next(t for t in json.loads(out.read_text())["terms"] if t["physics"] == "stiffness" and t["order"] == 3)
     row = next(line for line in printed.splitlines() if line.split()[:2] == ["x^3", "stiffness"])
     assert float(row.split()[3]) == pytest.approx(x3["stderr"], rel=1e-2)

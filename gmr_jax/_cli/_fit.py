@@ -100,9 +100,10 @@ def run(args) -> int:
         sol = fn(recs, lib, topology=args.topology, masses=masses, **kwargs)
     model, st = sol.value, sol.stats
     stage(f"writing {args.out}")
+    extra = {"resolution": st["resolution"].to_dict()} if "resolution" in st else {}  # gmr show prints it
     gmr.save_model(model, args.out, method=st["method"],
                    library={"r": lib.restoring_order, "d": lib.damping_order}, training=st["training"],
-                   warnings=load_warnings + list(st["warnings"]), data_range=data_range(recs))
+                   warnings=load_warnings + list(st["warnings"]), data_range=data_range(recs), **extra)
     print(f"{st['method']} model from {len(recs)} recording(s) -> {args.out}")
     for line in _term_table(model, {"terms": model.terms()}, 4):  # equations, coefficients, std. errors
         print(line)
@@ -112,6 +113,9 @@ def run(args) -> int:
                   f"K_r={rep.stats['K_r']}, K_d={rep.stats['K_d']}")
     for name, sc in st["training"].items():
         print(f"  training {name}: R2 {np.round(sc['r2'], 5).tolist()}, NRMSE {np.round(sc['nrmse'], 5).tolist()}")
+    if "resolution" in st:
+        print("What each well's data resolved (and the excitation that would resolve what they did not):")
+        print(str(st["resolution"]))
     if any(r.v is None or r.a is None for r in recs):
         print("  note: velocities/accelerations were estimated from x (Savitzky-Golay, see README)")
     if png is not None:
