@@ -37,14 +37,14 @@ from ._gls import hermite_gls, weighted_fit, weighted_system
 from ._hermite import hermite_interpolate, highest_order, monomial_map
 
 
-def _chosen_and_vectors(nodes, taylor, order, cov, method: str, alpha: float):
+def _chosen_and_vectors(nodes, taylor, order, cov, method: str, alpha: float, confining: bool = False):
     """The coordination's polynomial (as `coordinate` picks it), its embedded-error vectors
     (m, size) and the Birge ratio of its weighted fit (1 without redundancy)."""
     exact, k_herm, _ = hermite_interpolate(nodes, taylor, order)
     k_herm = int(k_herm)
     size = taylor.shape[0] * taylor.shape[1]
     if method == "gls":
-        coef, degree, _, stats = hermite_gls(nodes, taylor, order, cov, alpha)
+        coef, degree, _, stats = hermite_gls(nodes, taylor, order, cov, alpha, confining=confining)
         degree = int(degree)
     else:
         coef, degree, stats = exact, k_herm, {}
@@ -62,7 +62,8 @@ def _chosen_and_vectors(nodes, taylor, order, cov, method: str, alpha: float):
     return vectors, 1.0
 
 
-def discrepancy(fits: LocalFit, library: Library, *, method: str = "gls", alpha: float = 0.05):
+def discrepancy(fits: LocalFit, library: Library, *, method: str = "gls", alpha: float = 0.05,
+                confining: bool = False):
     """The embedded-error vectors and Birge ratios of one DOF's paper route (module docstring):
     `{"restoring": (vectors, birge), "damping": (vectors, birge)}`, each vector the monomial
     coefficients of a polynomial (the restoring force F, the damping polynomial C of
@@ -70,25 +71,27 @@ def discrepancy(fits: LocalFit, library: Library, *, method: str = "gls", alpha:
     a, c, _ = _taylor_blocks(fits.coef, library)
     cov_a, cov_c = _taylor_covariances(fits.covariance, library)
     x = fits.equilibrium
-    out = {"restoring": _chosen_and_vectors(x, a, highest_order(a != 0), cov_a, method, alpha)}
+    out = {"restoring": _chosen_and_vectors(x, a, highest_order(a != 0), cov_a, method, alpha, confining)}
     out["damping"] = (_chosen_and_vectors(x, c, highest_order(c != 0), cov_c, method, alpha)
                       if c.shape[1] > 0 else ([], 1.0))
     return out
 
 
 def calibrate_covariance(fits: LocalFit, library: Library, covariance, *, method: str = "gls",
-                         alpha: float = 0.05, restoring: bool = True, damping: bool = True) -> np.ndarray:
+                         alpha: float = 0.05, restoring: bool = True, damping: bool = True,
+                         confining: bool = False) -> np.ndarray:
     """The calibrated covariance of one DOF's global coefficients from the paper's route
     (`coordinate` with `method`, `alpha`; flat layout of `GlobalCoefficients.flat`):
     `covariance` (the propagated one, `coordinate`'s aux) with its restoring and damping blocks
     scaled by their Birge ratios, plus the embedded-error discrepancy of each (module
     docstring). `restoring` / `damping` False leaves that block as given (a block another
-    route produced, e.g. the joint damping of "gls + joint damping")."""
+    route produced, e.g. the joint damping of "gls + joint damping"); `confining` as
+    `coordinate`'s."""
     cov = np.array(covariance, float)
     a, c, _ = _taylor_blocks(fits.coef, library)
     ns = a.shape[0] * a.shape[1]
     nv = library.damping_order + 1
-    disc = discrepancy(fits, library, method=method, alpha=alpha)
+    disc = discrepancy(fits, library, method=method, alpha=alpha, confining=confining)
     scale = np.ones(cov.shape[0])
     extra = np.zeros_like(cov)
     blocks = []
