@@ -143,6 +143,24 @@ def summary(runs: list[dict], before: dict | None, oracles: dict) -> list[str]:
     return lines
 
 
+def per_cell(runs: list[dict], before: dict | None) -> list[str]:
+    """Median over seeds of each cell's error, before -> after, and the cells within target."""
+    lines = ["| chain | amp | median error per cell 1..5, before (%) | after (%) | cells within target, before "
+             "| after |", "|---|---:|---|---|---:|---:|"]
+    groups = {}
+    for r in runs:
+        groups.setdefault((r["twist"], r["amp"]), []).append(r)
+    for (tw, amp), rs in groups.items():
+        aft = np.array([r["err"] for r in rs])
+        bef = np.array([before[k]["err"] for r in rs if before and (k := f"{tw} {amp:g} {r['seed']}") in before])
+        tgt = TARGETS[tw]
+        btxt = ", ".join(f"{v:.2f}" for v in np.median(bef, axis=0)) if bef.size else "-"
+        bcount = f"{int(np.sum(bef <= tgt))}/{bef.size}" if bef.size else "-"
+        lines.append(f"| {tw} | {amp * 1e3:g} mm | {btxt} | " + ", ".join(f"{v:.2f}" for v in np.median(aft, axis=0))
+                     + f" | {bcount} | {int(np.sum(aft <= tgt))}/{aft.size} |")
+    return lines
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--twists", nargs="+", default=["linear", "torque_free"])
@@ -155,9 +173,15 @@ def main():
     p.add_argument("--fmax", type=float, default=None,
                    help="upper frequency of the training chirp (Hz; default the system's 10 Hz): the excitation check")
     p.add_argument("--tag", default="", help="suffix of the results file: results/kresling_targets_<tag>.md")
+    p.add_argument("--replot", action="store_true", help="only rewrite the Markdown from the --json of an earlier run")
     args = p.parse_args()
     cmd = " ".join(["python studies/kresling_targets.py"] + sys.argv[1:])
     t_start = time.perf_counter()
+    tag = f"_{args.tag}" if args.tag else ""
+    out = Path(args.json or RESULTS / "data" / f"kresling_targets_{args.label}{tag}.json")
+    if args.replot:
+        saved = json.loads(out.read_text())
+        return write(saved["runs"], saved["oracles"], args, saved["command"], saved.get("seconds", float("nan")))
     oracles = {}
     for tw in args.twists:
         system = g.systems.kresling5(twist=tw, damping_ratio=KRESLING5_DEPLOYMENT_DAMPING)
@@ -173,23 +197,28 @@ def main():
                 print(f"{tw} {amp * 1e3:g} mm seed {seed}: " + ", ".join(
                     f"{e:.2f} ({c['route']} K{c['K_r']} r{c['r_i']})" for e, c in zip(r["err"], r["cells"]))
                     + f"  [{r['t_fit']:.0f} s]", flush=True)
-    tag = f"_{args.tag}" if args.tag else ""
-    out = Path(args.json or RESULTS / "data" / f"kresling_targets_{args.label}{tag}.json")
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"command": cmd, "runs": runs, "oracles": oracles}, indent=1))
+    seconds = time.perf_counter() - t_start
+    out.write_text(json.dumps({"command": cmd, "runs": runs, "oracles": oracles, "seconds": seconds}, indent=1))
+    write(runs, oracles, args, cmd, seconds)
+
+
+def write(runs, oracles, args, cmd, seconds):
     before = None
     if args.before:
         before = {f"{r['twist']} {r['amp']:g} {r['seed']}": r for r in json.loads(Path(args.before).read_text())["runs"]}
-    lines = [
+    lines = ([
         "# Kresling accuracy targets (issue 15): restoring error per cell", "",
-        f"Command: `{cmd}` ({time.perf_counter() - t_start:.0f} s; training chirp 0.5-{args.fmax or 10:g} Hz)"
-        + (f"; before: `{args.before}`" if args.before else "") + ". Chains: `kresling5(twist=..., "
+        f"Command: `{cmd}` ({seconds:.0f} s; training chirp 0.5-{args.fmax or 10:g} Hz)"
+        + (f"; before: `{args.before}` (this script at the commit before the change, module docstring)"
+           if args.before else "") + ". Chains: `kresling5(twist=..., "
         f"damping_ratio={KRESLING5_DEPLOYMENT_DAMPING:g})` (the amplitude study's), data `make_recordings(system, "
         "amp, snr_db=60, seed=s)` (30 s base chirps 0.5-10 Hz, folded and deployed), `reconstruct(recs, "
         "Library(5, 5))` defaults. Error: relative L2 of the restoring force over x in [-0.1 L, 1.1 L]. "
         "Oracles: Hermite interpolant of each well's exact Taylor coefficients (F, F', F''/2: degree 5; "
         "up to F'''/6: degree 7). Targets: torque-free <= 3 % every cell, nominal <= 0.5 % every cell.", "",
-        "## Summary", ""] + summary(runs, before, oracles) + ["", "## Every cell", ""] + table(runs, before)
+        "## Summary", ""] + summary(runs, before, oracles) + ["", "## Per cell", ""] + per_cell(runs, before)
+        + ["", "## Every cell", ""] + table(runs, before))
     text = "\n".join(lines) + "\n"
     if not args.no_md:
         (RESULTS / f"kresling_targets{'_' + args.tag if args.tag else ''}.md").write_text(text)
