@@ -28,36 +28,46 @@ silent); the paper route's discrepancy is added to it (`add_discrepancy`): what 
 local data leave open between them does not depend on the estimator.
 """
 
+import equinox as eqx
 import numpy as np
 
 from .._fit._local_fit import LocalFit
+from .._trace_cache import disk_traced
 from .._fit._library import Library
 from ._coordinate import _taylor_blocks, _taylor_covariances
 from ._gls import hermite_gls, weighted_fit, weighted_system
 from ._hermite import hermite_interpolate, highest_order, monomial_map
 
+# Called outside any jit (once per DOF after the coordination): each as one compiled program,
+# not dozens of eager operations (~20 ms apiece to trace, lower and load in a new process);
+# the two large ones keep their traced program on disk (`_trace_cache`, the CLI's warm start).
+_interpolate = disk_traced(hermite_interpolate)
+_gls = disk_traced(hermite_gls)
+_system = eqx.filter_jit(weighted_system)
+_wfit = eqx.filter_jit(weighted_fit)
+
 
 def _chosen_and_vectors(nodes, taylor, order, cov, method: str, alpha: float, confining: bool = False):
     """The coordination's polynomial (as `coordinate` picks it), its embedded-error vectors
     (m, size) and the Birge ratio of its weighted fit (1 without redundancy)."""
-    exact, k_herm, _ = hermite_interpolate(nodes, taylor, order)
+    exact, k_herm, _ = _interpolate(nodes, taylor, order)
     k_herm = int(k_herm)
     size = taylor.shape[0] * taylor.shape[1]
     if method == "gls":
-        coef, degree, _, stats = hermite_gls(nodes, taylor, order, cov, alpha, confining=confining)
+        coef, degree, _, stats = _gls(nodes, taylor, order, cov, alpha, confining=confining)
         degree = int(degree)
     else:
         coef, degree, stats = exact, k_herm, {}
     if degree < k_herm:
-        a_w, b_w, c, h, _ = weighted_system(nodes, taylor, order, cov)
-        nxt = monomial_map(c, h, size) @ weighted_fit(a_w, b_w, degree + 1)[0]
+        a_w, b_w, c, h, _ = _system(nodes, taylor, order, cov)
+        nxt = monomial_map(c, h, size) @ _wfit(a_w, b_w, degree + 1)[0]
         vectors = [np.asarray(nxt - coef)]
         dof = float(stats["dof"])
         birge = max(1.0, float(stats["chi2"]) / dof) if dof > 0 else 1.0
         return vectors, birge
     vectors = []
     for i in range(taylor.shape[0]):
-        lower, _, _ = hermite_interpolate(nodes, taylor, order.at[i].add(-1))
+        lower, _, _ = _interpolate(nodes, taylor, order.at[i].add(-1))
         vectors.append(np.asarray(exact - lower))
     return vectors, 1.0
 
