@@ -213,7 +213,7 @@ def write(runs, oracles, args, cmd, seconds):
         + (f"; before: `{args.before}` (this script at the commit before the change, module docstring)"
            if args.before else "") + ". Chains: `kresling5(twist=..., "
         f"damping_ratio={KRESLING5_DEPLOYMENT_DAMPING:g})` (the amplitude study's), data `make_recordings(system, "
-        "amp, snr_db=60, seed=s)` (30 s base chirps 0.5-10 Hz, folded and deployed), `reconstruct(recs, "
+        f"amp, snr_db=60, seed=s)` (30 s base chirps 0.5-{args.fmax or 10:g} Hz, folded and deployed), `reconstruct(recs, "
         "Library(5, 5))` defaults. Error: relative L2 of the restoring force over x in [-0.1 L, 1.1 L]. "
         "Oracles: Hermite interpolant of each well's exact Taylor coefficients (F, F', F''/2: degree 5; "
         "up to F'''/6: degree 7). Targets: torque-free <= 3 % every cell, nominal <= 0.5 % every cell.", "",
