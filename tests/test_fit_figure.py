@@ -58,3 +58,22 @@ def test_fit_figure_path_rule(tmp_path):
     assert figure_path("m.json", "x/f.png").as_posix() == "x/f.png"
     with pytest.raises(GMRInputError, match="--figure must name a .png"):
         figure_path("m.json", "f.svg")
+
+
+def test_figure_band_equals_force_band():
+    import jax
+
+    from gmr_jax.plots._fit import _model_band
+
+    terms = [{"dof": 0, "physics": "stiffness", "order": k, "coefficient": c} for k, c in ((1, -4.0), (3, 4.0))]
+    terms.append({"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.2})
+    base = gmr.from_terms([1.0], terms)
+    p = base.stiffness.shape[1] + base.velocity_damping.shape[1] + base.position_damping.shape[1]
+    a = np.random.default_rng(1).normal(size=(p, p))
+    model = gmr.GlobalModel(masses=base.masses, stiffness=base.stiffness, velocity_damping=base.velocity_damping,
+                            position_damping=base.position_damping, covariance=(a @ a.T)[None] * 1e-2)
+    x = np.linspace(-1.5, 1.5, 7)[:, None]
+    lo, hi = _model_band(model)(x)
+    ref = jax.vmap(lambda xx: gmr.force_band(model, xx))(x)
+    np.testing.assert_allclose(lo, ref.lower, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(hi, ref.upper, rtol=1e-10, atol=1e-12)

@@ -32,17 +32,27 @@ def _forces(model, x, v):
     return (np.asarray(jax.vmap(model.restoring)(x)), np.asarray(jax.vmap(model.damping)(x, v)))
 
 
-def _model_band(model):
-    """x (n, dof) -> (lower, upper) of the 95 % band of F_r from the model's covariance
-    (`force_band`), one jitted program; None when the model has no covariance."""
-    if getattr(model, "covariance", None) is None:
+def _model_band(model, level: float = 0.95):
+    """x (n, dof) -> (lower, upper) of the `level` band of F_r from the model's covariance, the
+    same numbers as `force_band` (F_r is linear in the stiffness block, the first ones of each
+    DOF's covariance) in NumPy: no JAX program to trace for a figure; None without a covariance."""
+    cov = getattr(model, "covariance", None)
+    if cov is None:
         return None
-    import jax
+    from statistics import NormalDist
 
-    from .._model._uncertainty import force_band
+    z = NormalDist().inv_cdf(0.5 + level / 2)
+    k = np.asarray(model.stiffness, float)
+    c = np.asarray(cov, float)[:, : k.shape[1], : k.shape[1]]
 
-    lower_upper = jax.jit(jax.vmap(lambda x: (lambda b: (b.lower, b.upper))(force_band(model, x))))
-    return lambda X: tuple(np.asarray(a) for a in lower_upper(np.asarray(X, float)))
+    def band(X):
+        X = np.asarray(X, float)
+        phi = X[:, :, None] ** np.arange(k.shape[1])  # (n, dof, K+1)
+        mean = np.einsum("ndk,dk->nd", phi, k)
+        se = np.sqrt(np.maximum(np.einsum("ndj,djk,ndk->nd", phi, c, phi), 0.0))
+        return mean - z * se, mean + z * se
+
+    return band
 
 
 def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "x", force_unit: str = "force",
