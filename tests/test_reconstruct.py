@@ -108,13 +108,18 @@ def test_unshared_velocity_damping_mask():
 def test_damping_terms_found_at_one_well_only_are_dropped():
     """Kresling chain (damping ratio 0.2, 0.75 mm, seed 4): the base cell's folded-well fit
     selects v|v|, v^3, v^3|v| (each > 3 sigma) in place of the unselected x^2 v; averaged by
-    Eq. (21) they put 8 % error on the global damping. The sharing rule removes them."""
+    Eq. (21) they put 8 % error on the global damping. The sharing rule removes them. (With the
+    restoring order extended while its next term is resolved, the default since issue 15, the
+    artefact no longer arises on this record: 0.42 % without sharing; the rule is tested on the
+    fits as they were, `extend_restoring=False`, and the default is checked at the end.)"""
     system = g.systems.kresling5(damping_ratio=0.2)
     recs = g.systems.make_recordings(system, 7.5e-4, snr_db=60.0, seed=4)
     box = system.x_range[0], system.v_range[0]
-    raw = g.reconstruct(recs, g.Library(5, 5), shared_damping=False)
+    raw = g.reconstruct(recs, g.Library(5, 5), shared_damping=False, extend_restoring=False)
     assert damping_error(raw.value, system.truth, 0, *box) > 0.05
-    res = g.reconstruct(recs, g.Library(5, 5))
+    default = g.reconstruct(recs, g.Library(5, 5), shared_damping=False)
+    assert damping_error(default.value, system.truth, 0, *box) < 0.01
+    res = g.reconstruct(recs, g.Library(5, 5), extend_restoring=False)
     assert res.stats["dofs"][0].stats["dropped_velocity_damping"] == [2, 3, 4]
     assert damping_error(res.value, system.truth, 0, *box) < 0.005
     assert np.all(res.value.velocity_damping[:, 2:] == 0)
