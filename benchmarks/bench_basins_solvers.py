@@ -6,7 +6,7 @@ half-sine, settle 10 s, rtol 1e-6 / atol 1e-8, 100 x 100 (f, A) grid), `basin_ma
 Reported per chain: step attempts per point, vector-field evaluations per point (attempts x new
 stages per step: Tsit5 6, Dopri5 6 with first-same-as-last, Dopri8 12), and the map's agreement
 with Tsit5's. These counts do not depend on the machine or its load; the run time is printed too,
-but only a quiet machine's times mean anything (see bench_basins_numba.md for those).
+run only (a second call), meaningful on a quiet machine only.
 
     python benchmarks/bench_basins_solvers.py [--cells 3 5 10] [--n 100]
 
@@ -53,9 +53,10 @@ def main():
             ref = None
             for solver in ("tsit5", "dopri5", "dopri8"):
                 s = SweepSettings(batching="lanes", solver=solver)
+                basin_map(model, f, a, wells, settings=s, throw=False)  # compile (and a first run)
                 t = time.perf_counter()
-                bm = basin_map(model, f, a, wells, settings=s, throw=False).value
-                wall = time.perf_counter() - t
+                bm = basin_map(model, f * (1 + 1e-9), a, wells, settings=s, throw=False).value
+                wall = time.perf_counter() - t  # run only: a second call on new grid values
                 cfg = np.asarray(bm.config)
                 ref = cfg if ref is None else ref
                 steps = float(np.mean(np.asarray(bm.steps)))
@@ -68,16 +69,16 @@ def main():
         "input and tolerances of `bench_basins_numba.py` (rtol 1e-6, atol 1e-8, settle 10 s), "
         f"{args.n} x {args.n} grid. Steps: attempts per point (accepted + rejected); evaluations: attempts x "
         "new stages per step (Tsit5 6, Dopri5 6, Dopri8 12). Machine-independent counts; the wall time "
-        "(first call, compile included) is only indicative.",
+        "(second call, run only, all cores) means something only on a quiet machine.",
         "",
-        "| cells | c (N s/m) | pair | steps/point | evaluations/point | vs Tsit5 evaluations | map = Tsit5's | wall s (with compile) |",
+        "| cells | c (N s/m) | pair | steps/point | evaluations/point | vs Tsit5 evaluations | map = Tsit5's | run s |",
         "|---:|---:|---|---:|---:|---:|---:|---:|",
     ]
     base = {}
     for n, c, solver, steps, evals, agree, wall in rows:
         base.setdefault((n, c), evals)
         lines.append(f"| {n} | {c:g} | {solver} | {steps:.0f} | {evals:.0f} | {evals / base[(n, c)]:.2f}x | "
-                     f"{100 * agree:.2f} % | {wall:.1f} |")
+                     f"{100 * agree:.2f} % | {wall:.2f} |")
     lines.append("")
     Path(args.out).write_text("\n".join(lines))
     print("\n".join(lines))
