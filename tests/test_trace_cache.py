@@ -35,20 +35,20 @@ def _same(a, b):
 
 def test_fit_local_from_disk_equals_plain_jit(trace_dir):
     x, v, y = _data()
-    lib = gmr.Library(3, 1)
-    ref = gmr.fit_local.__wrapped_jit__(x, v, y, lib, throw=False)
-    first = gmr.fit_local(x, v, y, lib, throw=False)  # exported and written
+    lib, sel = gmr.Library(3, 1), gmr.AutoThreshold(n_grid=8, n_folds=3)  # the CV path, kept small
+    ref = gmr.fit_local.__wrapped_jit__(x, v, y, lib, gmr.STLS(), sel, throw=False)
+    first = gmr.fit_local(x, v, y, lib, gmr.STLS(), sel, throw=False)  # exported and written
     files = list(trace_dir.glob("*/fit_local-*.pkl"))
     assert len(files) == 1
     tc._MEMO.clear()  # a new process: only the file is left
-    second = gmr.fit_local(x, v, y, lib, throw=False)
+    second = gmr.fit_local(x, v, y, lib, gmr.STLS(), sel, throw=False)
     assert type(second) is type(ref) and type(second.value) is gmr.LocalFit
     _same(first, ref)
     _same(second, ref)
     assert second.result == gmr.RESULTS.successful
     # another shape, another static argument: other entries
-    gmr.fit_local(x[:500], v[:500], y[:500], lib, throw=False)
-    gmr.fit_local(x, v, y, gmr.Library(3, 2), throw=False)
+    gmr.fit_local(x[:500], v[:500], y[:500], lib, gmr.STLS(), None, throw=False)
+    gmr.fit_local(x[:500], v[:500], y[:500], gmr.Library(3, 2), gmr.STLS(), None, throw=False)
     assert len(list(trace_dir.glob("*/fit_local-*.pkl"))) == 3
 
 
