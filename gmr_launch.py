@@ -27,12 +27,17 @@ def _version() -> str:
         return "0+unknown"
 
 
+def _command(argv) -> str | None:
+    """The subcommand: the first argument that is not an option."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv == ["--version"]:
         print(f"gmr_jax {_version()}")
         return 0
-    cmd = next((a for a in argv if not a.startswith("-")), None)
+    cmd = _command(argv)
     if cmd in _LONG and os.environ.get("GMR_PROGRESS", "") != "0" and "--no-progress" not in argv \
             and "-h" not in argv and "--help" not in argv:
         try:
@@ -52,8 +57,7 @@ def console() -> None:
     a multi-process sweep's `jax.distributed` client shuts down at exit."""
     argv = sys.argv[1:]
     rc = main(argv)
-    cmd = next((a for a in argv if not a.startswith("-")), None)
-    if cmd == "basins":
+    if _command(argv) == "basins":
         sys.exit(rc)
     try:
         sys.stdout.flush()

@@ -121,10 +121,10 @@ def run(args) -> int:
     if png is not None:
         stage(f"writing the figure {png} (and .pdf)")
         from ..plots._fit import fit_figure
+        from ..plots._save import save_with_pdf
 
-        fig = fit_figure(model, recs, title=f"{st['method']} model ({Path(args.out).name}) against its recordings")
-        fig.savefig(png, dpi=110)
-        fig.savefig(png.with_suffix(".pdf"))
+        save_with_pdf(fit_figure(model, recs, title=f"{st['method']} model ({Path(args.out).name}) against its "
+                                 f"recordings"), png)
         print(f"  figure: {png} (and {png.with_suffix('.pdf').name}): restoring and damping forces over the "
               f"data ranges, residuals")
     for w in st["warnings"]:

@@ -6,6 +6,7 @@ import numpy as np
 
 from .._custom_types import Array, Float
 from .._errors import GMRInputError, as_whole_number, describe
+from .._topology import _xp
 
 # `physics` names of the "gmr-model/1" format, per family.
 STIFFNESS = "stiffness"
@@ -14,13 +15,15 @@ POSITION_DAMPING = "position_damping"
 
 
 def signed_power(v, j: int, sign_eps: float = 0.0):
-    """sgn(v)|v|^j (Eq. 7); with `sign_eps > 0`, sgn is smoothed to tanh(v / sign_eps)."""
-    s = jnp.sign(v) if sign_eps == 0.0 else jnp.tanh(v / sign_eps)
+    """sgn(v)|v|^j (Eq. 7); with `sign_eps > 0`, sgn is smoothed to tanh(v / sign_eps). NumPy in,
+    NumPy out (figures evaluate a model without JAX); JAX arrays and tracers otherwise."""
+    xp = _xp(v)
+    s = xp.sign(v) if sign_eps == 0.0 else xp.tanh(v / sign_eps)
     if j == 0:
         return s
     if j % 2 == 1:
-        return v**j if sign_eps == 0.0 else s * jnp.abs(v) ** j
-    return s * jnp.abs(v) ** j
+        return v**j if sign_eps == 0.0 else s * xp.abs(v) ** j
+    return s * xp.abs(v) ** j
 
 
 class Library(eqx.Module):

@@ -26,17 +26,21 @@ def forces(model: AbstractMechanicalModel, x, v) -> np.ndarray:
     bucket of rows, so similar sizes share it) where an eager `vmap(model.force)` dispatches
     each of its dozens of operations separately (each traced, lowered and loaded in a new
     process: ~20 ms apiece on 2 cores)."""
-    x, v = np.asarray(x, float), np.asarray(v, float)
-    n = x.shape[0]
-    m = _bucket(n)
-    pad = ((0, m - n), (0, 0))
-    return np.asarray(_forces(model, jnp.asarray(np.pad(x, pad)), jnp.asarray(np.pad(v, pad))))[:n]
+    return np.asarray(_bucketed(_forces, model, np.asarray(x, float), np.asarray(v, float)))
 
 
 def _bucket(n: int) -> int:
     """Row count compiled for n rows: the next power of two (at least 16), so that calls on
     similar sizes share one compiled function."""
     return max(16, 1 << (int(n) - 1).bit_length())
+
+
+def _bucketed(fn, model, *arrays):
+    """`fn(model, *arrays)[:n]` with every (concrete) array's n rows zero-padded to `_bucket(n)`."""
+    n = arrays[0].shape[0]
+    m = _bucket(n)
+    padded = [jnp.asarray(np.pad(np.asarray(a), [(0, m - n)] + [(0, 0)] * (np.ndim(a) - 1))) for a in arrays]
+    return fn(model, *padded)[:n]
 
 
 def predict(
@@ -90,10 +94,7 @@ def predict(
     f = jnp.zeros((n, d)) if force is None else jnp.asarray(force, float).reshape(n, d)
     if any(is_tracer(a) for a in (x, v, b, f)) or n == 0:
         return _predict(model, x, v, b, f)
-    m = _bucket(n)
-    pad = ((0, m - n), (0, 0))
-    out = _predict(model, jnp.pad(x, pad), jnp.pad(v, pad), jnp.pad(b, (0, m - n)), jnp.pad(f, pad))
-    return out[:n]
+    return _bucketed(_predict, model, x, v, b, f)
 
 
 def input_gains(model: AbstractMechanicalModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,12 +1,12 @@
 """Basin picture: final configuration over the (f, A) grid, coloured by configuration."""
 
-from pathlib import Path
-
 import matplotlib
 import numpy as np
 from matplotlib.colors import BoundaryNorm, ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
+
+from ._save import save_with_pdf
 
 
 def config_label(config: int, n_dof: int) -> str:
@@ -53,7 +53,5 @@ def basin_figure(f, A, config, n_dof: int, path=None, title: str = "", *, ax=Non
     ax.set_ylabel("actuation amplitude A")
     ax.set_title(title or "deployment basins (tip half-sine, Eq. 25)")
     if path is not None:  # PNG (or the suffix given) and a PDF beside it
-        fig.savefig(path, dpi=110)
-        if Path(path).suffix.lower() != ".pdf":
-            fig.savefig(Path(path).with_suffix(".pdf"))
+        save_with_pdf(fig, path)
     return fig

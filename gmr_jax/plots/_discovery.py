@@ -6,11 +6,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from .._discover._report import _cell
-
-
-def _save(fig, png: Path) -> None:
-    fig.savefig(png, dpi=110)
-    fig.savefig(png.with_suffix(".pdf"))
+from ._save import save_with_pdf
 
 
 def discovery_figures(report, out_dir) -> list[str]:
@@ -37,7 +33,7 @@ def discovery_figures(report, out_dir) -> list[str]:
             ax.set_ylabel("v")
             fig.colorbar(im, ax=ax, label="mean residual force (recording's force units)")
     fig.tight_layout()
-    _save(fig, out / "residual_map.png")
+    save_with_pdf(fig, out / "residual_map.png")
     names.append("residual_map.png")
 
     s = report.series
@@ -58,7 +54,7 @@ def discovery_figures(report, out_dir) -> list[str]:
         axes[i, 1].set_ylabel("residual PSD")
         axes[i, 1].set_title(_cell(report, i))
     fig.tight_layout()
-    _save(fig, out / "residual_time_frequency.png")
+    save_with_pdf(fig, out / "residual_time_frequency.png")
     names.append("residual_time_frequency.png")
 
     sims_b, sims_a = s.get("sims", (None, None))
@@ -91,6 +87,6 @@ def discovery_figures(report, out_dir) -> list[str]:
             ax.legend(fontsize=8)
         axes[-1, 0].set_xlabel("t (s)")
         fig.tight_layout()
-        _save(fig, out / "holdout_before_after.png")
+        save_with_pdf(fig, out / "holdout_before_after.png")
         names.append("holdout_before_after.png")
     return names

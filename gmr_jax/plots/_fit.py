@@ -3,16 +3,11 @@
 import numpy as np
 from matplotlib.figure import Figure
 
+from .._fit._library import signed_power
 from .._reconstruct._reconstruct import regression_targets
 
 #: one colour per recording (well), reused in every panel
 COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
-
-
-def _signed_power(v, j: int, sign_eps: float):
-    """sgn(v)|v|^j (Eq. 7) in NumPy, as `gmr_jax._fit._library.signed_power`."""
-    s = np.sign(v) if sign_eps == 0.0 else np.tanh(v / sign_eps)
-    return s if j == 0 else s * np.abs(v) ** j
 
 
 def _forces(model, x, v):
@@ -24,7 +19,7 @@ def _forces(model, x, v):
         k, b, c = (np.asarray(a, float) for a in (model.stiffness, model.velocity_damping, model.position_damping))
         fr = np.stack([P.polyval(x[:, i], k[i]) for i in range(k.shape[0])], axis=1)
         fd = np.stack([P.polyval(x[:, i], c[i]) * v[:, i]
-                       + sum(b[i, j] * _signed_power(v[:, i], j, model.sign_eps) for j in range(b.shape[1]))
+                       + sum(b[i, j] * signed_power(v[:, i], j, model.sign_eps) for j in range(b.shape[1]))
                        for i in range(k.shape[0])], axis=1)
         return fr, fd
     import jax
@@ -53,6 +48,15 @@ def _model_band(model, level: float = 0.95):
         return mean - z * se, mean + z * se
 
     return band
+
+
+def _dress(ax, xlabel: str, ylabel: str, title: str) -> None:
+    """The zero line, labels, title and legend every panel of the figure carries."""
+    ax.axhline(0.0, color="0.7", lw=0.8)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=7, loc="best")
 
 
 def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "x", force_unit: str = "force",
@@ -104,11 +108,8 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
             xz = xs[z] - fr[z] * (xs[z + 1] - xs[z]) / (fr[z + 1] - fr[z])
             stable = fr[z + 1] > fr[z]
             ax_r.plot([xz], [0.0], "o", ms=6, mfc="k" if stable else "w", mec="k")
-        ax_r.axhline(0.0, color="0.7", lw=0.8)
-        ax_r.set_xlabel(f"{x_unit} (DOF {i})")
-        ax_r.set_ylabel(f"restoring force ({force_unit})")
-        ax_r.set_title("restoring force (filled o: stable, open: saddle)", fontsize=9)
-        ax_r.legend(fontsize=7, loc="best")
+        _dress(ax_r, f"{x_unit} (DOF {i})", f"restoring force ({force_unit})",
+               "restoring force (filled o: stable, open: saddle)")
 
         for k, r in enumerate(recs):
             col = COLOURS[k % len(COLOURS)]
@@ -120,11 +121,8 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
             fd = _forces(model, Xv, V)[1][:, i]
             ax_d.plot(vs, fd, "-", color=col, lw=1.5, label=f"{r.name} (x = {np.mean(r.x[:, i]):.3g})")
             ax_d.axvspan(float(np.min(r.v[:, i])), float(np.max(r.v[:, i])), color=col, alpha=0.15, lw=0)
-        ax_d.axhline(0.0, color="0.7", lw=0.8)
-        ax_d.set_xlabel(f"velocity ({x_unit}/s)")
-        ax_d.set_ylabel(f"damping force ({force_unit})")
-        ax_d.set_title("damping force at each well (shaded: recorded speeds)", fontsize=9)
-        ax_d.legend(fontsize=7, loc="best")
+        _dress(ax_d, f"velocity ({x_unit}/s)", f"damping force ({force_unit})",
+               "damping force at each well (shaded: recorded speeds)")
 
         for k, r in enumerate(recs):
             col = COLOURS[k % len(COLOURS)]
@@ -139,11 +137,8 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
             lo_, hi_ = np.minimum.reduceat(res, edges[:-1]), np.maximum.reduceat(res, edges[:-1])
             ax_e.fill_between(r.t[edges[:-1]], lo_, hi_, color=col, alpha=0.5, lw=0, step="post",
                               label=f"{r.name}: NRMSE {nrmse:.3g}")
-        ax_e.axhline(0.0, color="0.7", lw=0.8)
-        ax_e.set_xlabel("time (s)")
-        ax_e.set_ylabel(f"measured - model ({force_unit})")
-        ax_e.set_title("force residual: target (Eq. 8) - model (envelope)", fontsize=9)
-        ax_e.legend(fontsize=7, loc="best")
+        _dress(ax_e, "time (s)", f"measured - model ({force_unit})",
+               "force residual: target (Eq. 8) - model (envelope)")
     if title:
         fig.suptitle(title)
     if path is not None:

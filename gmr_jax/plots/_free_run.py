@@ -4,6 +4,8 @@ residual (model - data) below, per DOF."""
 import numpy as np
 from matplotlib.figure import Figure
 
+from ._save import save_with_pdf
+
 
 def free_run_figure(run, path=None, *, x_unit: str = "recording units", title: str = "") -> Figure:
     """Two panels per DOF: measured and simulated x against time, and the residual
@@ -29,7 +31,5 @@ def free_run_figure(run, path=None, *, x_unit: str = "recording units", title: s
     if path is not None:
         from pathlib import Path
 
-        path = Path(path)
-        fig.savefig(path.with_suffix(".png"), dpi=120)
-        fig.savefig(path.with_suffix(".pdf"))
+        save_with_pdf(fig, Path(path).with_suffix(".png"), dpi=120)
     return fig
