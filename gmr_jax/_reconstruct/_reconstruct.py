@@ -11,6 +11,7 @@ import numpy as np
 
 from .._coordination._coordinate import GlobalCoefficients, coordinate, split_flat
 from .._coordination._discrepancy import add_discrepancy, calibrate_covariance
+from .._coordination._joint import CONFLICT as JOINT_CONFLICT
 from .._coordination._joint import JointSettings, damping_faults, joint_coordinate, restoring_faults
 from .._errors import GMRInputError
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, Library
@@ -470,7 +471,11 @@ def _calibrated(coord: Solution, fits: LocalFit, library: Library, route: str, p
         return g, cov
     if route == "joint":
         alt = np.asarray(coord.stats.get("joint_alternative", np.zeros(cov.shape[0])), float)
-        cov = cov + np.outer(alt, alt)
+        # prior-data conflict (`_joint.CONFLICT`): the data reject every admissible law; the one they prefer
+        # (inadmissible: a spurious well or an escape where no datum is) differs from the chosen one by
+        # `joint_unconstrained`, a discrepancy of the chosen law's form, not noise: it enters whole
+        free = np.asarray(coord.stats.get("joint_unconstrained", np.zeros(cov.shape[0])), float)
+        cov = cov + np.outer(alt, alt) + np.outer(free, free)
         if not paper_sound:
             return g, cov
         s, b, p, cov = add_discrepancy(g.stiffness, g.velocity_damping, g.position_damping, cov, fits, library)
@@ -683,6 +688,10 @@ def reconstruct(
         warnings += _sanity.check_determination(i, np.asarray(g.stiffness), np.asarray(coord.aux)[:n_k, :n_k],
                                                 float(xall.min()), float(xall.max()))
         se = split_flat(jnp.sqrt(jnp.clip(jnp.diag(coord.aux), 0.0)), g)
+        if route == "joint" and float(coord.stats.get("joint_conflict", 0.0)) > JOINT_CONFLICT:
+            warnings += _sanity.check_conflict(i, np.asarray(g.stiffness), np.asarray(coord.aux)[:n_k, :n_k],
+                                               coord.stats["joint_unconstrained"], float(coord.stats["joint_conflict"]),
+                                               float(xall.min()), float(xall.max()))
         g, cov_i = _calibrated(coord, fits, library, route, paper_sound, confining)
         se = GlobalCoefficients(*(np.pad(np.asarray(a), (0, np.asarray(b).shape[0] - np.asarray(a).shape[0]))
                                   for a, b in zip((se.stiffness, se.velocity_damping, se.position_damping),
