@@ -60,15 +60,17 @@ def _chosen_and_vectors(nodes, taylor, order, cov, method: str, alpha: float, co
         coef, degree, stats = exact, k_herm, {}
     if degree < k_herm:
         a_w, b_w, c, h, _ = _system(nodes, taylor, order, cov)
-        nxt = monomial_map(c, h, size) @ _wfit(a_w, b_w, degree + 1)[0]
-        vectors = [np.asarray(nxt - coef)]
+        nxt = monomial_map(float(c), float(h), size) @ np.asarray(_wfit(a_w, b_w, degree + 1)[0])
+        vectors = [nxt - np.asarray(coef)]
         dof = float(stats["dof"])
         birge = max(1.0, float(stats["chi2"]) / dof) if dof > 0 else 1.0
         return vectors, birge
     vectors = []
     for i in range(taylor.shape[0]):
-        lower, _, _ = _interpolate(nodes, taylor, order.at[i].add(-1))
-        vectors.append(np.asarray(exact - lower))
+        fewer = np.array(order)
+        fewer[i] -= 1
+        lower, _, _ = _interpolate(nodes, taylor, fewer)
+        vectors.append(np.asarray(exact) - np.asarray(lower))
     return vectors, 1.0
 
 
