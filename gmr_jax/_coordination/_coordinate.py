@@ -28,7 +28,9 @@ class GlobalCoefficients(eqx.Module):
     position_damping: Float[Array, " kd"]
 
     def flat(self):
-        return jnp.concatenate([self.stiffness, self.velocity_damping, self.position_damping])
+        parts = [self.stiffness, self.velocity_damping, self.position_damping]
+        xp = np if all(isinstance(a, np.ndarray) for a in parts) else jnp  # NumPy in, NumPy out
+        return xp.concatenate(parts)
 
 
 def _taylor_blocks(coef: Float[Array, "n terms"], library: Library):

@@ -28,7 +28,6 @@ silent); the paper route's discrepancy is added to it (`add_discrepancy`): what 
 local data leave open between them does not depend on the estimator.
 """
 
-import equinox as eqx
 import numpy as np
 
 from .._fit._local_fit import LocalFit
@@ -40,11 +39,11 @@ from ._hermite import hermite_interpolate, highest_order, monomial_map
 
 # Called outside any jit (once per DOF after the coordination): each as one compiled program,
 # not dozens of eager operations (~20 ms apiece to trace, lower and load in a new process);
-# the two large ones keep their traced program on disk (`_trace_cache`, the CLI's warm start).
+# each keeps its traced program on disk (`_trace_cache`, the CLI's warm start).
 _interpolate = disk_traced(hermite_interpolate)
 _gls = disk_traced(hermite_gls)
-_system = eqx.filter_jit(weighted_system)
-_wfit = eqx.filter_jit(weighted_fit)
+_system = disk_traced(weighted_system)
+_wfit = disk_traced(weighted_fit)
 
 
 def _chosen_and_vectors(nodes, taylor, order, cov, method: str, alpha: float, confining: bool = False):
