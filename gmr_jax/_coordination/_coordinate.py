@@ -3,9 +3,11 @@
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float, Int
 
 from .._solution import RESULTS, Solution, error_if_failed
+from .._topology import _xp
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, Library
 from .._fit._local_fit import LocalFit
 from .._trace_cache import disk_traced
@@ -26,25 +28,29 @@ class GlobalCoefficients(eqx.Module):
     position_damping: Float[Array, " kd"]
 
     def flat(self):
-        return jnp.concatenate([self.stiffness, self.velocity_damping, self.position_damping])
+        parts = [self.stiffness, self.velocity_damping, self.position_damping]
+        xp = np if all(isinstance(a, np.ndarray) for a in parts) else jnp  # NumPy in, NumPy out
+        return xp.concatenate(parts)
 
 
 def _taylor_blocks(coef: Float[Array, "n terms"], library: Library):
     """Split local coefficients into the restoring Taylor vector (orders 0..r), the damping
     polynomial's Taylor vector [B_1, c_1..c_d] (orders 0..d) and the other B_j."""
+    xp = _xp(coef)  # NumPy in, NumPy out (the calibration after the jitted coordination)
     n = coef.shape[0]
     d = library.damping_order
     a = coef[:, library.indices(STIFFNESS)]
     vd_idx = library.indices(VELOCITY_DAMPING)
-    vd = coef[:, vd_idx] if vd_idx.size else jnp.zeros((n, d + 1))
+    vd = coef[:, vd_idx] if vd_idx.size else xp.zeros((n, d + 1))
     pd_idx = library.indices(POSITION_DAMPING)
-    pd = coef[:, pd_idx] if pd_idx.size else jnp.zeros((n, d))
-    c = jnp.concatenate([vd[:, 1:2], pd], axis=1)
+    pd = coef[:, pd_idx] if pd_idx.size else xp.zeros((n, d))
+    c = xp.concatenate([vd[:, 1:2], pd], axis=1)
     return a, c, vd
 
 
 def _taylor_covariances(cov: Float[Array, "n terms terms"], library: Library):
     """Covariance blocks of the restoring and damping-polynomial Taylor vectors."""
+    xp = _xp(cov)
     n = cov.shape[0]
     d = library.damping_order
     idx_a = library.indices(STIFFNESS)
@@ -52,7 +58,7 @@ def _taylor_covariances(cov: Float[Array, "n terms terms"], library: Library):
     idx_c = list(vd_idx[1:2]) + list(pd_idx)
     sub = lambda idx: cov[:, idx][:, :, idx]  # noqa: E731
     cov_a = sub(idx_a)
-    cov_c = sub(jnp.asarray(idx_c, int)) if len(idx_c) == d + 1 else jnp.zeros((n, d + 1, d + 1))
+    cov_c = sub(np.asarray(idx_c, int)) if len(idx_c) == d + 1 else xp.zeros((n, d + 1, d + 1))
     return cov_a, cov_c
 
 

@@ -28,7 +28,6 @@ silent); the paper route's discrepancy is added to it (`add_discrepancy`): what 
 local data leave open between them does not depend on the estimator.
 """
 
-import equinox as eqx
 import numpy as np
 
 from .._fit._local_fit import LocalFit
@@ -40,11 +39,11 @@ from ._hermite import hermite_interpolate, highest_order, monomial_map
 
 # Called outside any jit (once per DOF after the coordination): each as one compiled program,
 # not dozens of eager operations (~20 ms apiece to trace, lower and load in a new process);
-# the two large ones keep their traced program on disk (`_trace_cache`, the CLI's warm start).
+# each keeps its traced program on disk (`_trace_cache`, the CLI's warm start).
 _interpolate = disk_traced(hermite_interpolate)
 _gls = disk_traced(hermite_gls)
-_system = eqx.filter_jit(weighted_system)
-_wfit = eqx.filter_jit(weighted_fit)
+_system = disk_traced(weighted_system)
+_wfit = disk_traced(weighted_fit)
 
 
 def _chosen_and_vectors(nodes, taylor, order, cov, method: str, alpha: float, confining: bool = False):
@@ -60,15 +59,17 @@ def _chosen_and_vectors(nodes, taylor, order, cov, method: str, alpha: float, co
         coef, degree, stats = exact, k_herm, {}
     if degree < k_herm:
         a_w, b_w, c, h, _ = _system(nodes, taylor, order, cov)
-        nxt = monomial_map(c, h, size) @ _wfit(a_w, b_w, degree + 1)[0]
-        vectors = [np.asarray(nxt - coef)]
+        nxt = monomial_map(float(c), float(h), size) @ np.asarray(_wfit(a_w, b_w, degree + 1)[0])
+        vectors = [nxt - np.asarray(coef)]
         dof = float(stats["dof"])
         birge = max(1.0, float(stats["chi2"]) / dof) if dof > 0 else 1.0
         return vectors, birge
     vectors = []
     for i in range(taylor.shape[0]):
-        lower, _, _ = _interpolate(nodes, taylor, order.at[i].add(-1))
-        vectors.append(np.asarray(exact - lower))
+        fewer = np.array(order)
+        fewer[i] -= 1
+        lower, _, _ = _interpolate(nodes, taylor, fewer)
+        vectors.append(np.asarray(exact) - np.asarray(lower))
     return vectors, 1.0
 
 

@@ -17,6 +17,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from .._topology import _xp
+
 
 def _binom_table(n: int) -> np.ndarray:
     import math
@@ -26,8 +28,9 @@ def _binom_table(n: int) -> np.ndarray:
 
 def highest_order(support: Bool[Array, "... orders"]) -> Int[Array, "..."]:
     """Highest index with a nonzero (active) coefficient; 0 if none."""
-    idx = jnp.arange(support.shape[-1])
-    return jnp.max(jnp.where(support, idx, 0), axis=-1)
+    xp = _xp(support)
+    idx = xp.arange(support.shape[-1])
+    return xp.max(xp.where(support, idx, 0), axis=-1)
 
 
 def scaling(nodes: Float[Array, " n"]):
@@ -49,12 +52,13 @@ def confluent_vandermonde(s: Float[Array, " n"], r: int, size: int):
 
 def monomial_map(c, h, size: int):
     """Matrix T with A = T @ Ã: sum_k Ã_k ((x - c)/h)^k = sum_m A_m x^m."""
-    binom = jnp.asarray(_binom_table(size))  # [m, k] = C(k, m)
-    k = jnp.arange(size)
-    m = jnp.arange(size)
+    xp = np if isinstance(c, (float, np.ndarray, np.floating)) and isinstance(h, (float, np.ndarray, np.floating)) else jnp
+    binom = xp.asarray(_binom_table(size))  # [m, k] = C(k, m)
+    k = xp.arange(size)
+    m = xp.arange(size)
     expo = k[None, :] - m[:, None]
-    powc = jnp.where(expo >= 0, (-c) ** jnp.maximum(expo, 0), 0.0)
-    return binom * powc * h ** (-k[None, :].astype(jnp.result_type(h)))
+    powc = xp.where(expo >= 0, (-c) ** xp.maximum(expo, 0), 0.0)
+    return binom * powc * h ** (-k[None, :].astype(xp.result_type(h)))
 
 
 def hermite_interpolate(

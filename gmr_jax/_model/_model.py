@@ -111,13 +111,13 @@ class GlobalModel(AbstractMechanicalModel):
             (POSITION_DAMPING, self.position_damping),
         ):
             a = np.asarray(arr)
-            se = None if self.stderr is None else self.stderr.get(name)
+            se = None if self.stderr is None or self.stderr.get(name) is None else np.asarray(self.stderr[name])
             for i in range(a.shape[0]):
                 for k in range(a.shape[1]):
                     if a[i, k] != 0.0 and abs(a[i, k]) > tol:
                         t = {"dof": i, "physics": name, "order": k, "coefficient": float(a[i, k])}
                         if se is not None and np.isfinite(se[i, k]):
-                            t["stderr"] = float(np.asarray(se)[i, k])
+                            t["stderr"] = float(se[i, k])
                         out.append(t)
         return out
 

@@ -8,7 +8,8 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .._errors import GMRInputError, is_tracer
-from ._model import AbstractMechanicalModel
+from .._fit._library import signed_power
+from ._model import AbstractMechanicalModel, GlobalModel
 
 
 @eqx.filter_jit
@@ -22,11 +23,35 @@ def _forces(model, x, v):
 
 
 def forces(model: AbstractMechanicalModel, x, v) -> np.ndarray:
-    """F(x, v) of every DOF at n states (n, dof), as NumPy: one compiled program (padded to a
-    bucket of rows, so similar sizes share it) where an eager `vmap(model.force)` dispatches
-    each of its dozens of operations separately (each traced, lowered and loaded in a new
-    process: ~20 ms apiece on 2 cores)."""
-    return np.asarray(_bucketed(_forces, model, np.asarray(x, float), np.asarray(v, float)))
+    """F(x, v) of every DOF at n states (n, dof), as NumPy. A `GlobalModel` is evaluated in NumPy
+    (`numpy_forces`); another model by one compiled program (padded to a bucket of rows, so
+    similar sizes share it) where an eager `vmap(model.force)` dispatches each of its dozens of
+    operations separately (each traced, lowered and loaded in a new process: ~20 ms apiece on
+    2 cores)."""
+    x, v = np.asarray(x, float), np.asarray(v, float)
+    if isinstance(model, GlobalModel) and not any(is_tracer(a) for a in jax.tree.leaves(model)):
+        fr, fd = numpy_forces(model, x, v)
+        return fr + fd
+    return _bucketed(_forces, model, x, v)
+
+
+def numpy_forces(model: GlobalModel, x, v) -> tuple[np.ndarray, np.ndarray]:
+    """(F_r, F_d) of a `GlobalModel` at n states (n, dof), each (n, dof), in NumPy: the same
+    sums as `GlobalModel.restoring` / `.damping` (Horner's rule, `signed_power`), with no JAX
+    program to trace (the bookkeeping of `reconstruct`, figures)."""
+    x, v = np.atleast_2d(np.asarray(x, float)), np.atleast_2d(np.asarray(v, float))
+    k, b, c = (np.asarray(a, float) for a in (model.stiffness, model.velocity_damping, model.position_damping))
+
+    def horner(coef, z):  # coef (dof, orders), z (n, dof)
+        out = np.zeros_like(z)
+        for col in coef.T[::-1]:
+            out = out * z + col
+        return out
+
+    fd = horner(c, x) * v
+    for j in range(b.shape[1]):
+        fd = fd + b[:, j] * signed_power(v, j, model.sign_eps)
+    return horner(k, x), fd
 
 
 def _bucket(n: int) -> int:
@@ -39,8 +64,8 @@ def _bucketed(fn, model, *arrays):
     """`fn(model, *arrays)[:n]` with every (concrete) array's n rows zero-padded to `_bucket(n)`."""
     n = arrays[0].shape[0]
     m = _bucket(n)
-    padded = [jnp.asarray(np.pad(np.asarray(a), [(0, m - n)] + [(0, 0)] * (np.ndim(a) - 1))) for a in arrays]
-    return fn(model, *padded)[:n]
+    padded = [np.pad(np.asarray(a), [(0, m - n)] + [(0, 0)] * (np.ndim(a) - 1)) for a in arrays]
+    return np.asarray(fn(model, *padded))[:n]  # sliced in NumPy: no eager JAX operation
 
 
 def predict(
@@ -94,7 +119,7 @@ def predict(
     f = jnp.zeros((n, d)) if force is None else jnp.asarray(force, float).reshape(n, d)
     if any(is_tracer(a) for a in (x, v, b, f)) or n == 0:
         return _predict(model, x, v, b, f)
-    return _bucketed(_predict, model, x, v, b, f)
+    return jnp.asarray(_bucketed(_predict, model, x, v, b, f))
 
 
 def input_gains(model: AbstractMechanicalModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -219,10 +219,23 @@ def training_scores(model: GlobalModel, recs, masses, topology) -> dict:
 
 
 def _screen(fits: LocalFit, n_sigma: float) -> LocalFit:
-    se = jnp.sqrt(jnp.clip(jnp.diagonal(fits.covariance, axis1=1, axis2=2), 0.0))
-    keep = jnp.abs(fits.coef) >= n_sigma * se
-    cov = jnp.where(keep[:, :, None] & keep[:, None, :], fits.covariance, 0.0)
-    return eqx.tree_at(lambda f: (f.coef, f.covariance), fits, (jnp.where(keep, fits.coef, 0.0), cov))
+    """Local coefficients under `n_sigma` standard errors set to zero (and their covariance rows);
+    NumPy in, NumPy out (the bookkeeping after the jitted fits dispatches no JAX operation)."""
+    coef, cov = np.asarray(fits.coef), np.asarray(fits.covariance)
+    se = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None))
+    keep = np.abs(coef) >= n_sigma * se
+    cov = np.where(keep[:, :, None] & keep[:, None, :], cov, 0.0)
+    return eqx.tree_at(lambda f: (f.coef, f.covariance), fits, (np.where(keep, coef, 0.0), cov))
+
+
+def _set_well(fits: LocalFit, k: int, new: LocalFit) -> LocalFit:
+    """`fits` (stacked over wells, NumPy leaves) with well `k` replaced by `new` (stacked, one well)."""
+    def put(a, b):
+        a = np.array(a)  # a copy: the caller's fits are not changed
+        a[k] = np.asarray(b)[0]
+        return a
+
+    return jax.tree.map(put, fits, new)
 
 
 def low_order_terms(library: Library, restoring_order: int = 1) -> np.ndarray:
@@ -267,10 +280,10 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
                             support=jnp.asarray((coef[k] != 0) & ~drop), throw=False)
             if sol.result != RESULTS.successful:
                 failure.note(sol.result, f"DOF {dof}, well {k}: refit without unshared damping terms")
-            new = jax.tree.map(lambda a: a[None], sol.value)
+            new = jax.tree.map(lambda a: np.asarray(a)[None], sol.value)
             if screen_sigma is not None:
                 new = _screen(new, screen_sigma)
-            fits = jax.tree.map(lambda a, b, k=k: a.at[k].set(b[0]), fits, new)
+            fits = _set_well(fits, k, new)
         dropped += [k for (_, k), d in zip(library.terms(), drop) if d]
     return fits, sorted(dropped)
 
@@ -298,16 +311,16 @@ def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failur
             mask = coef != 0
             mask[idx[top + 1]] = True
             slv = eqx.tree_at(lambda s: s.threshold, solver, fits.threshold[k])
-            sol = fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=jnp.asarray(mask),
-                            support=jnp.asarray(mask), throw=False)
+            sol = jax.device_get(fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=mask,
+                                           support=mask, throw=False))
             c = float(sol.value.coef[idx[top + 1]])
             se = float(np.sqrt(max(float(sol.value.covariance[idx[top + 1], idx[top + 1]]), 0.0)))
-            if sol.result != RESULTS.successful or not abs(c) >= n_sigma * se:
+            if int(sol.result._value) != int(RESULTS.successful._value) or not abs(c) >= n_sigma * se:
                 break
-            new = _screen(jax.tree.map(lambda a: a[None], sol.value), n_sigma)
+            new = _screen(jax.tree.map(lambda a: np.asarray(a)[None], sol.value), n_sigma)
             if float(new.coef[0, idx[top + 1]]) == 0.0:
                 break
-            fits = jax.tree.map(lambda a, b, k=k: a.at[k].set(b[0]), fits, new)
+            fits = _set_well(fits, k, new)
             added[k].append(top + 1)
     return fits, added
 
@@ -347,8 +360,9 @@ def _replacement_settings(paper: Solution) -> JointSettings:
 def _well_r2(g: GlobalCoefficients, xs, vs, ys, w) -> np.ndarray:
     """Per well, the R² of the global law `g` of one DOF on that well's samples (1 where the
     force does not vary and the law reproduces it)."""
-    model = GlobalModel(masses=jnp.ones(1), stiffness=g.stiffness[None], velocity_damping=g.velocity_damping[None],
-                        position_damping=g.position_damping[None])
+    model = GlobalModel(masses=np.ones(1), stiffness=np.asarray(g.stiffness)[None],
+                        velocity_damping=np.asarray(g.velocity_damping)[None],
+                        position_damping=np.asarray(g.position_damping)[None])
     xs, vs, ys, w = (np.asarray(a) for a in (xs, vs, ys, w))
     yhat = forces(model, xs.reshape(-1, 1), vs.reshape(-1, 1))
     yhat = yhat.reshape(xs.shape)
@@ -402,7 +416,7 @@ def _odd_degree(paper: Solution, fits: LocalFit, library: Library, energy: float
     coef = np.trim_zeros(np.asarray(paper.value.stiffness, float), "b")
     if coef.size % 2 == 0 or coef.size < 2:
         return None
-    alt = coordinate(fits, library, method="gls", confining=True, throw=False)
+    alt = jax.device_get(coordinate(fits, library, method="gls", confining=True, throw=False))
     eq = np.asarray(fits.equilibrium)
     if alt.result != RESULTS.successful or not np.all(np.isfinite(np.asarray(alt.value.flat()))):
         return None
@@ -590,10 +604,9 @@ def reconstruct(
         xs, w = _pad_stack([[recs[k].x[:, i] for k in g] for g in groups])
         vs, _ = _pad_stack([[recs[k].v[:, i] for k in g] for g in groups])
         ys, _ = _pad_stack([[targets[k][:, i] for k in g] for g in groups])
-        xs, vs, ys, w = (jnp.asarray(a) for a in (xs, vs, ys, w))
-        keep = jnp.asarray(low_order_terms(library, keep_restoring_order)) if keep_low_orders else None
+        keep = low_order_terms(library, keep_restoring_order) if keep_low_orders else None
         say(f"{f'DOF {i + 1}/{d}: ' if d > 1 else ''}local fits at {len(groups)} wells")
-        sols = _fit_wells(xs, vs, ys, w, library, solver, select, keep)
+        sols = jax.device_get(_fit_wells(xs, vs, ys, w, library, solver, select, keep))  # NumPy from here on
         fits: LocalFit = sols.value
         if screen_sigma is not None:
             fits = _screen(fits, screen_sigma)
@@ -615,7 +628,8 @@ def reconstruct(
         if coordination == "joint":
             coord = _joint(fits, xs, vs, ys, w, speed)
         else:
-            coord = coordinate(fits, library, method="gls" if coordination == "auto" else coordination, throw=False)
+            coord = jax.device_get(coordinate(fits, library, method="gls" if coordination == "auto" else coordination,
+                                              throw=False))
             if coordination == "auto":
                 faults = _paper_route_faults(coord, fits, xs, vs, ys, w, speed)
                 why = faults["restoring"] + faults["damping"] + faults["data"]
@@ -687,7 +701,7 @@ def reconstruct(
         xall = np.concatenate(xcol)
         warnings += _sanity.check_determination(i, np.asarray(g.stiffness), np.asarray(coord.aux)[:n_k, :n_k],
                                                 float(xall.min()), float(xall.max()))
-        se = split_flat(jnp.sqrt(jnp.clip(jnp.diag(coord.aux), 0.0)), g)
+        se = split_flat(np.sqrt(np.clip(np.diag(np.asarray(coord.aux)), 0.0, None)), g)
         if route == "joint" and float(coord.stats.get("joint_conflict", 0.0)) > JOINT_CONFLICT:
             warnings += _sanity.check_conflict(i, np.asarray(g.stiffness), np.asarray(coord.aux)[:n_k, :n_k],
                                                coord.stats["joint_unconstrained"], float(coord.stats["joint_conflict"]),

@@ -3,7 +3,6 @@
 import numpy as np
 from matplotlib.figure import Figure
 
-from .._fit._library import signed_power
 from .._reconstruct._reconstruct import regression_targets
 
 #: one colour per recording (well), reused in every panel
@@ -12,18 +11,15 @@ COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:
 
 def _forces(model, x, v):
     """(restoring (n, dof), damping (n, dof)) at states (n, dof): NumPy for a `GlobalModel`
-    (no JAX dispatch in a figure), the model's own methods otherwise."""
-    x, v = np.atleast_2d(np.asarray(x, float)), np.atleast_2d(np.asarray(v, float))
-    if all(hasattr(model, k) for k in ("stiffness", "velocity_damping", "position_damping")):
-        P = np.polynomial.polynomial
-        k, b, c = (np.asarray(a, float) for a in (model.stiffness, model.velocity_damping, model.position_damping))
-        fr = np.stack([P.polyval(x[:, i], k[i]) for i in range(k.shape[0])], axis=1)
-        fd = np.stack([P.polyval(x[:, i], c[i]) * v[:, i]
-                       + sum(b[i, j] * signed_power(v[:, i], j, model.sign_eps) for j in range(b.shape[1]))
-                       for i in range(k.shape[0])], axis=1)
-        return fr, fd
+    (`numpy_forces`: no JAX dispatch in a figure), the model's own methods otherwise."""
+    from .._model._model import GlobalModel
+    from .._model._predict import numpy_forces
+
+    if isinstance(model, GlobalModel):
+        return numpy_forces(model, x, v)
     import jax
 
+    x, v = np.atleast_2d(np.asarray(x, float)), np.atleast_2d(np.asarray(v, float))
     return (np.asarray(jax.vmap(model.restoring)(x)), np.asarray(jax.vmap(model.damping)(x, v)))
 
 
