@@ -103,7 +103,7 @@ def to_pysindy(model, *, library: Library | None = None, mass: float = 1.0, inpu
     ps = _pysindy()
     d = model.n_dof
     cols = _columns(model)
-    libs, names, rows = [], [], []
+    libs, names = [], []
     xn, vn = [f"{state}{i}" for i in range(d)], [f"v{i}" for i in range(d)]
     for i in range(d):
         fns = [_basis(p, k) for p, k in cols]

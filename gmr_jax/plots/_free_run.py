@@ -1,7 +1,6 @@
 """Figure of a free run (`gmr_jax.free_run`): simulated over measured displacement, and the
 residual (model - data) below, per DOF."""
 
-import numpy as np
 from matplotlib.figure import Figure
 
 from ._save import save_with_pdf
