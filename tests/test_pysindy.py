@@ -149,3 +149,27 @@ def test_predict_vectorised_matches_and_traces():
     assert a.shape == (37, 1)
     with pytest.raises(g.GMRInputError, match=r"\(n, 3\)"):
         g.predict(model, x[:, :2], v[:, :2])
+
+
+@pytest.mark.parametrize("sign_eps", [0.0, 0.05])
+def test_numpy_forces_equal_the_models_own(sign_eps):
+    """`reconstruct` and the figures evaluate a `GlobalModel` in NumPy (`numpy_forces`, no JAX
+    program): the same F_r and F_d as its jitted `restoring` / `damping` (every term kind, a
+    smoothed sign, v = 0 exactly), and `forces` takes that path."""
+    from gmr_jax._model._predict import forces, numpy_forces
+
+    model = _chain().with_sign_eps(sign_eps)
+    x, v, _, _ = _states(3, 41)
+    v = np.asarray(v).copy()
+    v[:3] = 0.0
+    fr, fd = numpy_forces(model, x, v)
+    assert isinstance(fr, np.ndarray) and isinstance(fd, np.ndarray)
+    np.testing.assert_allclose(fr, np.asarray(jax.vmap(model.restoring)(jnp.asarray(x))), rtol=1e-13, atol=1e-12)
+    np.testing.assert_allclose(fd, np.asarray(jax.vmap(model.damping)(jnp.asarray(x), jnp.asarray(v))),
+                               rtol=1e-13, atol=1e-12)
+    np.testing.assert_allclose(forces(model, x, v), fr + fd, rtol=0, atol=0)
+    # a model that is not a GlobalModel goes through the compiled path, with the same result shape
+    truth = MODELS["joint"]()
+    got = forces(truth, x[:, :1], v[:, :1])
+    np.testing.assert_allclose(got, np.asarray(jax.vmap(truth.force)(jnp.asarray(x[:, :1]), jnp.asarray(v[:, :1]))),
+                               rtol=1e-13, atol=1e-9)
