@@ -318,3 +318,21 @@ def test_acceleration_only_chain_becomes_cell_deformations(rng):
     np.testing.assert_allclose(ind.x, rec.x)
     # idempotent: completing twice does not difference twice
     np.testing.assert_allclose(chain.complete("chain").x, chain.x)
+
+
+def test_one_dof_csv_with_plain_column_names(tmp_path):
+    """A one-DOF lab CSV headed t, x, v, force (the NPZ keys) reads as t, x0, v0, f0; naming a
+    column twice (x and x0) is refused with a message that says why."""
+    t = np.arange(0.0, 1.0, 1e-3)
+    x, v, f = 0.1 * np.sin(5 * t), 0.5 * np.cos(5 * t), np.sin(t)
+    np.savetxt(tmp_path / "plain.csv", np.column_stack([t, x, v, f]), delimiter=",", header="t, x, v, force",
+               comments="")
+    np.savetxt(tmp_path / "numbered.csv", np.column_stack([t, x, v, f]), delimiter=",", header="t,x0,v0,f0",
+               comments="")
+    a, b = g.load_recording(tmp_path / "plain.csv"), g.load_recording(tmp_path / "numbered.csv")
+    for k in ("t", "x", "v", "force"):
+        np.testing.assert_array_equal(getattr(a, k), getattr(b, k))
+    assert a.x.shape == (t.size, 1) and a.base_acc is None
+    np.savetxt(tmp_path / "twice.csv", np.column_stack([t, x, x]), delimiter=",", header="t,x,x0", comments="")
+    with pytest.raises(g.GMRInputError, match=r"\['x0'\] appear more than once.*x, v, a, f, force are read as"):
+        g.load_recording(tmp_path / "twice.csv")

@@ -369,6 +369,11 @@ def save_recording(rec: Recording, path) -> None:
     np.savez(path, **data)
 
 
+#: CSV headers of a one-DOF recording read as the numbered columns (an extension of the contract's
+#: t, x0.., v0.., a0.., f0..: the names lab files and the NPZ keys use)
+_CSV_ALIASES = {"x": "x0", "v": "v0", "a": "a0", "f": "f0", "force": "f0"}
+
+
 def _read_csv(path: Path, src: str, raw: bool = False):
     """The recording in a CSV file; with `raw`, every column by its header name (for a mapping)."""
     try:
@@ -380,7 +385,10 @@ def _read_csv(path: Path, src: str, raw: bool = False):
     if not lines or not lines[0].strip():
         raise GMRInputError(f"{src}: the first line must be the header row naming the columns (t, x0, ...)")
     header = [h.strip() for h in next(csv.reader([lines[0]]))]
-    expected = "t, x0.. (one per DOF; or v0.. or a0.. alone), optional v0.., a0.., f0.., base_acc"
+    expected = ("t, x0.. (one per DOF; or v0.. or a0.. alone), optional v0.., a0.., f0.., base_acc "
+                "(one DOF: x, v, a, f or force also read as x0, v0, a0, f0)")
+    if not raw:  # the names a one-DOF lab file uses (and the NPZ keys): x, v, a, force
+        header = [_CSV_ALIASES.get(h, h) for h in header]
 
     def known(h):
         if h in ("t", "base_acc"):
@@ -394,7 +402,8 @@ def _read_csv(path: Path, src: str, raw: bool = False):
                             f"(the first line must be this header)")
     dup = sorted({h for h in header if header.count(h) > 1})
     if dup:
-        raise GMRInputError(f"{src}: column(s) {dup} appear more than once in the header; keep one of each")
+        raise GMRInputError(f"{src}: column(s) {dup} appear more than once in the header (x, v, a, f, force are read "
+                            f"as x0, v0, a0, f0); keep one of each")
     rows = [(i + 1, r) for i, r in enumerate(lines) if i > 0 and r.strip()]
     if not rows:
         raise GMRInputError(f"{src}: the header is there but no data rows follow")
