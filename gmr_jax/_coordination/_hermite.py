@@ -13,6 +13,7 @@ rows above each r_i and columns above K are masked out (active rows are moved fi
 stable sort, masked rows/columns replaced by the identity), so the solve jits and vmaps.
 """
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
@@ -52,7 +53,7 @@ def confluent_vandermonde(s: Float[Array, " n"], r: int, size: int):
 
 def monomial_map(c, h, size: int):
     """Matrix T with A = T @ Ã: sum_k Ã_k ((x - c)/h)^k = sum_m A_m x^m."""
-    xp = np if isinstance(c, (float, np.ndarray, np.floating)) and isinstance(h, (float, np.ndarray, np.floating)) else jnp
+    xp = jnp if isinstance(c, jax.Array) or isinstance(h, jax.Array) else np  # NumPy in, NumPy out
     binom = xp.asarray(_binom_table(size))  # [m, k] = C(k, m)
     k = xp.arange(size)
     m = xp.arange(size)
