@@ -190,6 +190,7 @@ def test_emps_through_discover():
     assert rep.after["nrmse"] < 0.08
 
 
+@pytest.mark.slow  # a sensing variant of test_concealed_coulomb_found end to end (~14 s cold)
 def test_velocity_only_recordings_find_coulomb_and_hold_the_offset():
     """A laser vibrometer (v only) and the force: x is integrated, its equilibrium placed by the
     model (one stable root), Coulomb friction found, preload listed as not separable from the

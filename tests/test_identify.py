@@ -77,6 +77,7 @@ def test_homogeneous_and_believable_mass():
     assert mass_believable(1.0, 0.4) and not mass_believable(1.0, -0.9) and not mass_believable(1.0, np.nan)
 
 
+@pytest.mark.slow  # a discovery scenario end to end (~12 s cold); the identifiability rules themselves are tested above
 def test_base_excited_independent_dof_holds_the_mass_and_finds_the_friction():
     """Issue 14, finding 1: base excitation, independent topology (what `gmr fit` writes), hidden
     Coulomb friction. Before: mass 1 -> 2e-8, every coefficient scaled to ~0, "nothing missing"."""

@@ -36,6 +36,12 @@ def test_joint_small_amplitude(joint_data, damping, term):
     stable = [x for x, st in equilibria(m, 0, s.x_range[0]) if st]
     np.testing.assert_allclose(stable, [-1.1308, 1.1308], atol=5e-3)
     assert all(min(sc["r2"]) > 0.99 for sc in res.stats["training"].values())
+    # the default coordination ("auto") keeps the paper's route on the paper's case, to the bit
+    # (issue 15: the joint regression replaces it only where it is inadmissible)
+    assert res.stats["dofs"][0].stats["coordination"] == "gls"
+    paper = g.reconstruct(recs, g.Library(5, 5), coordination="gls").value
+    for block in ("stiffness", "velocity_damping", "position_damping"):
+        np.testing.assert_array_equal(np.asarray(getattr(m, block)), np.asarray(getattr(paper, block)))
 
 
 def test_gmc_sindy_runs_and_degrades(joint_data):
@@ -45,6 +51,8 @@ def test_gmc_sindy_runs_and_degrades(joint_data):
     assert damping_error(gm.value, s.truth, 0, s.x_range[0], s.v_range[0]) > 0.2
 
 
+@pytest.mark.slow  # a second NES reconstruction (Library(3, 3)); the default tier checks the NES at the
+# default orders (test_sanity.py::test_clean_builtin_data_give_no_warning)
 def test_nes_three_equilibria():
     s = g.systems.tristable_nes()
     recs = g.systems.make_recordings(s, 1e-3, snr_db=60.0, seed=0, duration=5.0)

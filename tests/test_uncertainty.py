@@ -230,6 +230,8 @@ def test_basin_probability_on_a_tiny_grid():
                             f, A, jax.random.key(0), 2, x_range=x_range)
 
 
+@pytest.mark.slow  # end to end: data -> reconstruct -> band vs truth -> file -> figure (~20 s cold); the
+# band's algebra, transforms and file round trip are tested in the default tier above
 def test_reconstructed_model_carries_a_calibrated_covariance(tmp_path):
     s = g.systems.bistable_joint("position_dependent")
     recs = g.systems.make_recordings(s, np.deg2rad(1.0), snr_db=40.0, seed=1, duration=20.0)

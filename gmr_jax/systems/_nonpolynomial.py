@@ -2,6 +2,7 @@
 them, as it would a real structure."""
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -62,9 +63,10 @@ class MagneticOscillator(_Oscillator):
 
 def stable_roots(model, lo: float = -5.0, hi: float = 5.0) -> np.ndarray:
     """Stable equilibria of a single-DOF model (F_r = 0, F_r' > 0) on [lo, hi]."""
-    f = lambda x: float(model.restoring(jnp.asarray([x]))[0])  # noqa: E731
+    force = jax.jit(lambda x: model.restoring(x[None])[0])  # one compiled scalar force
+    f = lambda x: float(force(jnp.asarray(x, dtype=float)))  # noqa: E731
     grid = np.linspace(lo, hi, 10001)
-    val = np.array([f(x) for x in grid])
+    val = np.asarray(jax.jit(jax.vmap(force))(jnp.asarray(grid)))  # the scan in one program
     idx = np.nonzero(np.sign(val[:-1]) != np.sign(val[1:]))[0]
     roots = np.array([brentq(f, grid[i], grid[i + 1], xtol=1e-14) for i in idx])
     return roots[[f(r + 1e-6) > f(r - 1e-6) for r in roots]]
