@@ -51,7 +51,7 @@ from ._model._model import (
     GlobalModel as GlobalModel,
     from_terms as from_terms,
 )
-from ._model._predict import predict as predict
+from ._model._predict import forces as forces, predict as predict
 from ._model._uncertainty import ForceBand as ForceBand, force_band as force_band, sample_models as sample_models
 from ._model._pysindy import from_pysindy as from_pysindy, to_pysindy as to_pysindy
 

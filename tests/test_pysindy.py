@@ -3,6 +3,7 @@
 import sys
 import warnings
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -173,3 +174,43 @@ def test_numpy_forces_equal_the_models_own(sign_eps):
     got = forces(truth, x[:, :1], v[:, :1])
     np.testing.assert_allclose(got, np.asarray(jax.vmap(truth.force)(jnp.asarray(x[:, :1]), jnp.asarray(v[:, :1]))),
                                rtol=1e-13, atol=1e-9)
+
+
+def test_public_forces_on_a_grid_under_jit_vmap_and_grad():
+    """`gmr.forces`: F = F_r + F_d (or the pair) on (n, dof) states; NumPy for a GlobalModel,
+    the compiled path for another model, JAX under jit / vmap / grad (grad against central
+    differences), a 1-DOF model on (n,) arrays, v None = 0, and a clear error on bad shapes."""
+    model = _chain()
+    x, v, _, _ = _states(3, 17)
+    x, v = np.asarray(x), np.asarray(v)
+    fr, fd = g.forces(model, x, v, parts=True)
+    np.testing.assert_allclose(fr, np.asarray(jax.vmap(model.restoring)(jnp.asarray(x))), rtol=1e-13, atol=1e-12)
+    np.testing.assert_allclose(fd, np.asarray(jax.vmap(model.damping)(jnp.asarray(x), jnp.asarray(v))),
+                               rtol=1e-13, atol=1e-12)
+    np.testing.assert_array_equal(g.forces(model, x, v), fr + fd)
+    np.testing.assert_array_equal(g.forces(model, x), fr)  # v = 0: the restoring force alone
+    # under jit: the same numbers, as JAX arrays
+    got = jax.jit(lambda x, v: g.forces(model, x, v))(x, v)
+    assert isinstance(got, jax.Array)
+    np.testing.assert_allclose(np.asarray(got), fr + fd, rtol=1e-13, atol=1e-12)
+    # vmap over models (a traced model): each model's own forces
+    scales = jnp.array([0.5, 1.0, 2.0])
+    batched = jax.vmap(lambda s: g.forces(eqx.tree_at(lambda m: m.stiffness, model, s * model.stiffness), x))(scales)
+    np.testing.assert_allclose(np.asarray(batched), np.asarray(scales)[:, None, None] * fr, rtol=1e-12, atol=1e-12)
+    # grad of the energy-like sum of F_r over x against central differences
+    fn = lambda x: jnp.sum(g.forces(model, x) ** 2)  # noqa: E731
+    gx = np.asarray(jax.grad(fn)(jnp.asarray(x)))
+    h, i = 1e-6, (4, 1)
+    e = np.zeros_like(x)
+    e[i] = h
+    fd_i = (float(fn(jnp.asarray(x + e))) - float(fn(jnp.asarray(x - e)))) / (2 * h)
+    assert gx[i] == pytest.approx(fd_i, rel=1e-6)
+    # another model (a system's truth) goes through the compiled path; a 1-DOF model takes (n,)
+    truth = MODELS["joint"]()
+    xs = np.linspace(-1.5, 1.5, 7)
+    np.testing.assert_allclose(g.forces(truth, xs)[:, 0], np.asarray(jax.vmap(truth.restoring)(jnp.asarray(xs)[:, None]))[:, 0],
+                               rtol=1e-13, atol=1e-9)
+    with pytest.raises(g.GMRInputError, match=r"\(n, 3\)"):
+        g.forces(model, x[:, :2], v[:, :2])
+    with pytest.raises(g.GMRInputError, match="mechanical model"):
+        g.forces("model.json", x)

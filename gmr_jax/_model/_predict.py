@@ -18,21 +18,74 @@ def _predict(model, x, v, b, f):
 
 
 @eqx.filter_jit
-def _forces(model, x, v):
-    return jax.vmap(model.force)(x, v)
+def _parts(model, x, v):
+    return jax.vmap(model.restoring)(x), jax.vmap(model.damping)(x, v)
 
 
-def forces(model: AbstractMechanicalModel, x, v) -> np.ndarray:
-    """F(x, v) of every DOF at n states (n, dof), as NumPy. A `GlobalModel` is evaluated in NumPy
-    (`numpy_forces`); another model by one compiled program (padded to a bucket of rows, so
-    similar sizes share it) where an eager `vmap(model.force)` dispatches each of its dozens of
-    operations separately (each traced, lowered and loaded in a new process: ~20 ms apiece on
-    2 cores)."""
-    x, v = np.asarray(x, float), np.asarray(v, float)
-    if isinstance(model, GlobalModel) and not any(is_tracer(a) for a in jax.tree.leaves(model)):
+def _states(name: str, model, x, v):
+    """x and v as (n, dof) arrays for `model` (a 1-DOF model also takes (n,)), or a clear
+    `GMRInputError`; v None is zero."""
+    if not isinstance(model, AbstractMechanicalModel):
+        raise GMRInputError(f"{name}: model must be a mechanical model, got {type(model).__name__}")
+    d = model.n_dof
+    xp = jnp if is_tracer(x) or is_tracer(v) else np
+    x = xp.asarray(x, float)
+    v = xp.zeros_like(x) if v is None else xp.asarray(v, float)
+    if d == 1 and x.ndim == 1:
+        x, v = x[:, None], v.reshape(-1, 1) if v.ndim == 1 else v
+    if x.ndim != 2 or x.shape[1] != d or v.shape != x.shape:
+        raise GMRInputError(f"{name}: x and v must both be (n, {d}) for this {d}-DOF model, got {x.shape} "
+                            f"and {v.shape}")
+    return x, v
+
+
+def forces(
+    model: AbstractMechanicalModel,
+    x: Float[ArrayLike, "n dof"],
+    v: Float[ArrayLike, "n dof"] | None = None,
+    *,
+    parts: bool = False,
+):
+    """The force each DOF carries, F(x, v) = F_r(x) + F_d(x, v) (Eq. 1), at n states: the
+    model's restoring and damping laws evaluated on a grid or on data.
+
+    **Arguments:**
+
+    - `model`: a mechanical model (`GlobalModel`, a system's truth).
+    - `x`, `v`: displacements and velocities, (n, dof) (a 1-DOF model also takes (n,));
+      `v` None is zero (then F is the restoring force alone, F_d(x, 0) = 0).
+    - `parts`: return (F_r, F_d) instead of their sum.
+
+    **Returns:** F (n, dof), or the pair (F_r (n, dof), F_d (n, dof)); NumPy arrays for
+    concrete inputs, JAX arrays under `jit`/`vmap`/`grad` (traced inputs or model).
+
+    A `GlobalModel` is evaluated in NumPy (Horner's rule: no JAX program to compile); another
+    model by one compiled program, padded to a bucket of rows so that similar sizes share it.
+
+    Examples:
+        The double well F_r = -x + x^3 with damping 0.1 v:
+
+        >>> import numpy as np
+        >>> import gmr_jax as gmr
+        >>> model = gmr.from_terms([1.0], [
+        ...     {"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -1.0},
+        ...     {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 1.0},
+        ...     {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.1}])
+        >>> gmr.forces(model, np.array([0.0, 0.5, 1.0, 2.0]))[:, 0].tolist()
+        [0.0, -0.375, 0.0, 6.0]
+        >>> fr, fd = gmr.forces(model, np.array([0.5]), np.array([2.0]), parts=True)
+        >>> float(fr[0, 0]), float(fd[0, 0])
+        (-0.375, 0.2)
+    """
+    x, v = _states("forces", model, x, v)
+    traced = is_tracer(x) or is_tracer(v) or any(is_tracer(a) for a in jax.tree.leaves(model))
+    if traced or x.shape[0] == 0:
+        fr, fd = _parts(model, jnp.asarray(x), jnp.asarray(v))
+    elif isinstance(model, GlobalModel):
         fr, fd = numpy_forces(model, x, v)
-        return fr + fd
-    return _bucketed(_forces, model, x, v)
+    else:
+        fr, fd = _bucketed(_parts, model, x, v)
+    return (fr, fd) if parts else fr + fd
 
 
 def numpy_forces(model: GlobalModel, x, v) -> tuple[np.ndarray, np.ndarray]:
@@ -61,11 +114,13 @@ def _bucket(n: int) -> int:
 
 
 def _bucketed(fn, model, *arrays):
-    """`fn(model, *arrays)[:n]` with every (concrete) array's n rows zero-padded to `_bucket(n)`."""
+    """`fn(model, *arrays)[:n]` (each output array's first n rows) with every (concrete)
+    array's n rows zero-padded to `_bucket(n)`."""
     n = arrays[0].shape[0]
     m = _bucket(n)
     padded = [np.pad(np.asarray(a), [(0, m - n)] + [(0, 0)] * (np.ndim(a) - 1)) for a in arrays]
-    return np.asarray(fn(model, *padded))[:n]  # sliced in NumPy: no eager JAX operation
+    # sliced in NumPy: no eager JAX operation
+    return jax.tree.map(lambda a: np.asarray(a)[:n], fn(model, *padded))
 
 
 def predict(

@@ -10,17 +10,11 @@ COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:
 
 
 def _forces(model, x, v):
-    """(restoring (n, dof), damping (n, dof)) at states (n, dof): NumPy for a `GlobalModel`
-    (`numpy_forces`: no JAX dispatch in a figure), the model's own methods otherwise."""
-    from .._model._model import GlobalModel
-    from .._model._predict import numpy_forces
+    """(restoring (n, dof), damping (n, dof)) at states (n, dof), in NumPy (`forces`: a
+    `GlobalModel` without any JAX dispatch)."""
+    from .._model._predict import forces
 
-    if isinstance(model, GlobalModel):
-        return numpy_forces(model, x, v)
-    import jax
-
-    x, v = np.atleast_2d(np.asarray(x, float)), np.atleast_2d(np.asarray(v, float))
-    return (np.asarray(jax.vmap(model.restoring)(x)), np.asarray(jax.vmap(model.damping)(x, v)))
+    return forces(model, x, v, parts=True)
 
 
 def _model_band(model, level: float = 0.95):
