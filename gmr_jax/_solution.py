@@ -84,12 +84,39 @@ class Solution(eqx.Module):
     - `result`: a `RESULTS` code; `RESULTS[sol.result]` gives the message.
     - `stats`: diagnostics (iterations, condition numbers, supports, warnings...).
     - `aux`: further outputs, e.g. a covariance.
+
+    Outside jit, `sol.status` names the result ("successful", "diverged", ...; an array of
+    names for a batch of results) and `sol.ok` says whether every one succeeded.
     """
 
     value: PyTree
     result: RESULTS
     stats: dict[str, PyTree]
     aux: Any = None
+
+    @property
+    def status(self):
+        """The result's name, e.g. "successful" or "diverged" (a str; a NumPy array of names
+        for a batch of results, e.g. from `vmap` with `throw=False`). Outside jit only."""
+        values = _concrete(self.result, "status")
+        if values.ndim == 0:
+            return code_name(int(values))
+        return np.vectorize(code_name, otypes=[object])(values).astype(str)
+
+    @property
+    def ok(self) -> bool:
+        """True when the result (every one, for a batch) is `RESULTS.successful`. Outside jit only."""
+        return bool(np.all(_concrete(self.result, "ok") == int(RESULTS.successful._value)))
+
+
+def _concrete(code, what: str) -> np.ndarray:
+    from ._errors import GMRInputError, is_tracer
+
+    value = getattr(code, "_value", code)
+    if is_tracer(value):
+        raise GMRInputError(f"Solution.{what} is known only outside jit/vmap: inside, compare "
+                            f"`sol.result == gmr.RESULTS.successful` (a traced boolean) instead")
+    return np.asarray(value)
 
 
 def error_if_failed(sol: Solution, throw: bool) -> Solution:

@@ -1,6 +1,7 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from scipy.integrate import solve_ivp
 
 import gmr_jax as g
@@ -34,6 +35,15 @@ def test_divergence_is_flagged_not_returned():
                      box=100.0, throw=False)
     assert sol.result == g.RESULTS.diverged
     assert np.all(np.isnan(np.asarray(sol.value[0])))
+    # named, not only coded: status and ok outside jit (one result and a vmapped batch)
+    assert sol.status == "diverged" and not sol.ok
+    batch = jax.vmap(lambda x0: g.simulate(m, g.NoInput(), jnp.linspace(0, 10, 11), x0, box=100.0,
+                                           throw=False))(jnp.array([[0.0], [2.0]]))
+    assert batch.status.tolist() == ["successful", "diverged"] and not batch.ok
+    ok = g.simulate(m, g.NoInput(), jnp.linspace(0, 1, 11), jnp.array([0.0]), throw=False)
+    assert ok.status == "successful" and ok.ok
+    with pytest.raises(g.GMRInputError, match="outside jit"):
+        jax.jit(lambda x0: g.simulate(m, g.NoInput(), jnp.linspace(0, 1, 11), x0, throw=False).ok)(jnp.array([0.1]))
 
 
 def test_grad_through_solve_vs_finite_differences():
