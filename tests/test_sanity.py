@@ -54,6 +54,8 @@ def nes_swinging():
                 extend_restoring=False)
 
 
+@pytest.mark.slow  # a third NES reconstruction (~15 s cold); the default tier checks the replacement on
+# sinusoidal joint records (test_10 below)
 def test_default_rejects_a_paper_route_that_explains_its_data_poorly():
     """On the NES driven across its wells the paper's interpolant has training R² < 0; the
     default coordination says so and takes the joint regression, whose model is admissible
@@ -211,6 +213,7 @@ def test_10_default_orders_on_sinusoidal_records(joint):
     sol, msgs = _fit(recs)
     st = sol.stats["dofs"][0].stats
     assert st["coordination"] == "joint" and st["joint_admissible"] and st["paper_route_rejected"]
+    assert any("explains the data of the well" in r for r in st["paper_route_rejected"])  # the reason, named
     assert not _has(msgs, "explains its own training data poorly") and not _has(msgs, "blew up")
     x = np.linspace(-1.5, 1.5, 301) * joint.equilibria.max()
     truth = np.polynomial.polynomial.polyval(x, [0.0, *g.systems.JOINT_STIFFNESS[:1], 0.0, g.systems.JOINT_STIFFNESS[1]])
