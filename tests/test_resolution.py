@@ -32,7 +32,7 @@ def test_influence_is_the_rms_of_the_cardinal_hermite_polynomials():
 
 def _joint(amplitude, snr_db, seed=0):
     s = g.systems.bistable_joint()
-    recs = g.systems.make_recordings(s, amplitude, snr_db=snr_db, seed=seed, duration=4.0)
+    recs = g.systems.make_recordings(s, amplitude, snr_db=snr_db, seed=seed, duration=5.0)  # test_sanity.DURATION: shared compiled fits
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         sol = g.reconstruct(recs)
