@@ -160,16 +160,8 @@ def predict(
         >>> gmr.predict(model, x, np.ones(4), base_acc=np.ones(4))[:, 0].tolist()
         [-1.1, -0.725, -1.1, -7.1]
     """
-    if not isinstance(model, AbstractMechanicalModel):
-        raise GMRInputError(f"predict: model must be a mechanical model, got {type(model).__name__}")
-    d = model.n_dof
-    x, v = jnp.asarray(x, float), jnp.asarray(v, float)
-    if d == 1 and x.ndim == 1:
-        x, v = x[:, None], v[:, None]
-    if x.ndim != 2 or x.shape[1] != d or v.shape != x.shape:
-        raise GMRInputError(f"predict: x and v must both be (n, {d}) for this {d}-DOF model, got {x.shape} "
-                            f"and {v.shape}")
-    n = x.shape[0]
+    x, v = _states("predict", model, x, v)
+    n, d = x.shape
     b = jnp.zeros(n) if base_acc is None else jnp.asarray(base_acc, float).reshape(n)
     f = jnp.zeros((n, d)) if force is None else jnp.asarray(force, float).reshape(n, d)
     if any(is_tracer(a) for a in (x, v, b, f)) or n == 0:

@@ -3,18 +3,11 @@
 import numpy as np
 from matplotlib.figure import Figure
 
+from .._model._predict import forces
 from .._reconstruct._reconstruct import regression_targets
 
 #: one colour per recording (well), reused in every panel
 COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
-
-
-def _forces(model, x, v):
-    """(restoring (n, dof), damping (n, dof)) at states (n, dof), in NumPy (`forces`: a
-    `GlobalModel` without any JAX dispatch)."""
-    from .._model._predict import forces
-
-    return forces(model, x, v, parts=True)
 
 
 def _model_band(model, level: float = 0.95):
@@ -83,7 +76,7 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
         xs = np.linspace(lo - pad, hi + pad, 400)
         X = np.zeros((xs.size, d))
         X[:, i] = xs
-        fr = _forces(model, X, np.zeros_like(X))[0][:, i]
+        fr = forces(model, X, parts=True)[0][:, i]
         ax_r.plot(xs, fr, "k-", lw=1.8, label="model F_r")
         if band is not None:
             blo, bhi = (np.asarray(b)[:, i] for b in band(X))
@@ -108,7 +101,7 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
             Xv = np.tile(np.mean(r.x, axis=0), (vs.size, 1))
             V = np.zeros_like(Xv)
             V[:, i] = vs
-            fd = _forces(model, Xv, V)[1][:, i]
+            fd = forces(model, Xv, V, parts=True)[1][:, i]
             ax_d.plot(vs, fd, "-", color=col, lw=1.5, label=f"{r.name} (x = {np.mean(r.x[:, i]):.3g})")
             ax_d.axvspan(float(np.min(r.v[:, i])), float(np.max(r.v[:, i])), color=col, alpha=0.15, lw=0)
         _dress(ax_d, f"velocity ({x_unit}/s)", f"damping force ({force_unit})",
@@ -117,7 +110,7 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
         for k, r in enumerate(recs):
             col = COLOURS[k % len(COLOURS)]
             y = regression_targets(r, masses, model.topology)[:, i]
-            fr_, fd_ = _forces(model, r.x, r.v)
+            fr_, fd_ = forces(model, r.x, r.v, parts=True)
             res = y - (fr_ + fd_)[:, i]
             nrmse = float(np.sqrt(np.sum(res**2) / max(np.sum((y - y.mean()) ** 2), 1e-300)))
             # envelope (min and max per bin of ~20 samples, 400 bins at most): every excursion
