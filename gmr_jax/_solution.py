@@ -56,13 +56,15 @@ def _value(code) -> int:
     return int(np.asarray(getattr(code, "_value", code)))
 
 
+_NAMES = {int(item._value): name for name, item in RESULTS._name_to_item.items()}
+
+
 def code_name(code) -> str:
     """The member name of a RESULTS code (an item or its integer value), e.g. "diverged"."""
     value = _value(code)
-    for name, item in RESULTS._name_to_item.items():
-        if int(item._value) == value:
-            return name
-    raise ValueError(f"{value} is not a RESULTS value")
+    if value not in _NAMES:
+        raise ValueError(f"{value} is not a RESULTS value")
+    return _NAMES[value]
 
 
 def message(code) -> str:
@@ -101,7 +103,7 @@ class Solution(eqx.Module):
         values = _concrete(self.result, "status")
         if values.ndim == 0:
             return code_name(int(values))
-        return np.vectorize(code_name, otypes=[object])(values).astype(str)
+        return np.vectorize(code_name, otypes=[str])(values)
 
     @property
     def ok(self) -> bool:
