@@ -1,4 +1,5 @@
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -300,6 +301,20 @@ def test_lane_field_matches_the_model_equations(topology, load):
                     out_axes=1)(x, v, t, f, a)
     np.testing.assert_allclose(np.asarray(got[3:]), np.asarray(want), rtol=1e-12, atol=1e-9)
     np.testing.assert_array_equal(np.asarray(got[:3]), np.asarray(v))
+
+
+def test_lane_half_period_sin_is_sin_on_the_load_phase():
+    """The lanes' polynomial sine equals sin on [0, pi] to 4e-16 (the phase of the half-sine
+    while the load is on), in float32 to float32 resolution, and clips outside it."""
+    from gmr_jax._basins._lanes import _half_period_sin
+
+    theta = np.linspace(0.0, np.pi, 200_001)
+    got = np.asarray(jax.jit(_half_period_sin)(jnp.asarray(theta)))
+    np.testing.assert_allclose(got, np.sin(theta), rtol=0, atol=4e-16)
+    got32 = np.asarray(_half_period_sin(jnp.asarray(theta, jnp.float32)))
+    assert got32.dtype == np.float32
+    np.testing.assert_allclose(got32, np.sin(theta), rtol=0, atol=5e-7)
+    np.testing.assert_allclose(np.asarray(_half_period_sin(jnp.asarray([-0.5, 4.0]))), [0.0, 0.0], atol=1e-15)
 
 
 def test_lanes_step_budget_is_per_point():
