@@ -245,7 +245,7 @@ def test_use_cpu_cores_after_jax_started_is_a_clear_error():
     jnp.zeros(1).block_until_ready()  # JAX has started in this process
     with pytest.raises(g.GMRInputError, match="before the first JAX computation"):
         g.use_cpu_cores(2)
-    assert g.use_cpu_cores(2, strict=False) == len(__import__("jax").devices("cpu"))
+    assert g.use_cpu_cores(2, strict=False) == len(jax.devices("cpu"))
 
 
 def test_default_chunk_scales_with_the_number_of_cells():
@@ -282,8 +282,6 @@ def test_lanes_match_member_and_a_tight_reference_with_per_point_steps():
 @pytest.mark.parametrize("topology", ["chain", "independent"])
 @pytest.mark.parametrize("load", ["tip", "base"])
 def test_lane_field_matches_the_model_equations(topology, load):
-    import jax
-
     from gmr_jax._basins._lanes import lane_field
 
     terms = [{"dof": i, "physics": p, "order": o, "coefficient": c}

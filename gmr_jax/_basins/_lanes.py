@@ -61,6 +61,9 @@ def _combine(y, h, coeffs, ks):
     return y if acc is None else y + h[None] * acc
 
 
+_COS_TAYLOR = [(-1) ** n / math.factorial(2 * n) for n in range(11, -1, -1)]  # highest power first
+
+
 def _half_period_sin(theta):
     """sin(theta) for theta in [0, pi] (clipped there): cos(theta - pi/2) as its Taylor series to
     degree 22, an even polynomial in (theta - pi/2)^2 with |error| < 4e-16 on the whole range.
@@ -73,9 +76,6 @@ def _half_period_sin(theta):
     for coef in _COS_TAYLOR[1:]:
         out = out * u2 + coef
     return out
-
-
-_COS_TAYLOR = [(-1) ** n / math.factorial(2 * n) for n in range(11, -1, -1)]  # highest power first
 
 
 def _batched_force(model, x, v):
