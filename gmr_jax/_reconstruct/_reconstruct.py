@@ -23,7 +23,7 @@ from .._model._predict import forces
 from .._recordings._recording import Recording, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
-from . import _resolution, _sanity
+from . import _resolution, _sanity, _shape_prior
 from ._sanity import GMRDataWarning
 
 #: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
@@ -499,6 +499,34 @@ def _calibrated(coord: Solution, fits: LocalFit, library: Library, route: str, p
     return g, calibrate_covariance(fits, library, cov, method=route, confining=confining)
 
 
+def _borrow(fits: LocalFit, plan: list[dict], xs, vs, ys, w, library: Library):
+    """Refit the wells of one DOF that borrow orders (`_shape_prior.refit_with_prior`); returns the
+    fits and, per well, the orders borrowed."""
+    eq = np.asarray(fits.equilibrium, float)
+    span = float(eq[-1] - eq[0])
+    coef, cov = np.array(fits.coef, float), np.array(fits.covariance, float)
+    borrowed = []
+    for k, borrow in enumerate(plan):
+        if borrow:
+            coef[k], cov[k] = _shape_prior.refit_with_prior(
+                xs[k] - eq[k], vs[k], ys[k], w[k], library, coef[k], float(fits.rss[k]),
+                float(fits.n_samples[k]), span, borrow)
+        borrowed.append(sorted(borrow))
+    return eqx.tree_at(lambda f: (f.coef, f.covariance), fits, (coef, cov)), borrowed
+
+
+def _design_stats(design: dict | None, i: int, borrowed: list, why: str | None = None) -> dict:
+    """`dofs[i].stats["shared_design"]`: the orders this DOF borrowed per well, the lending cells,
+    the cells' estimated design spread tau, or why this DOF took no part."""
+    if design is None:
+        return {"used": False, "why": "off or a single DOF"}
+    out = {"tau": design["tau"], "cells": design["members"], "borrowed": borrowed,
+           "used": any(borrowed)}
+    if i in design["excluded"] or why:
+        out["why"] = why or design["excluded"][i]
+    return out
+
+
 def reconstruct(
     recordings: list[Recording],
     library: Library = Library(5, 5),
@@ -514,6 +542,7 @@ def reconstruct(
     keep_restoring_order: int | None = None,
     shared_damping: bool = True,
     extend_restoring: bool | None = None,
+    shared_design: bool | None = None,
     throw: bool = True,
     progress: Callable[[str], None] | None = None,
 ) -> Solution:
@@ -563,6 +592,14 @@ def reconstruct(
       `keep_restoring_order`: with v, a estimated from x, a higher order absorbs the
       differentiation filter's gain error).
 
+    - `shared_design`: with several DOFs, cells of one design (the same wells at the same
+      relative positions, Taylor ratios that agree across cells: `_shape_prior`) lend the
+      restoring orders their local fits resolve to the cells whose fits stop lower, as a prior
+      on those cells' own local regressions (value and slope stay their own; the prior's
+      spread, from the cells' measured differences, enters the covariance). Reported in
+      `dofs[i].stats["shared_design"]`. Default (None): on, except with `coordination="hermite"`
+      (the paper's method as published). 5-cell Kresling chains: RESULTS.md, issue 15.
+
     - `throw`: raise `GMRComputationError` on a numerical failure (a local fit or the
       coordination); with False, read `result` (the model then holds NaN where it failed).
     - `progress`: called with a short sentence at each stage (per DOF: local fits,
@@ -599,6 +636,7 @@ def reconstruct(
     targets = [regression_targets(r, masses, topology) for r in recs]
     stiff, vdamp, pdamp, se_s, se_v, se_p, covs, reports = [], [], [], [], [], [], [], []
     k1 = library.terms().index((STIFFNESS, 1)) if library.restoring_order >= 1 else None
+    local = []
     for i in range(d):
         _, labels, groups = wells[i]
         xs, w = _pad_stack([[recs[k].x[:, i] for k in g] for g in groups])
@@ -620,65 +658,87 @@ def reconstruct(
         added = [[] for _ in groups]
         if extend_restoring and screen_sigma is not None:
             fits, added = _extend_restoring(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure)
-        say(f"{f'DOF {i + 1}/{d}: ' if d > 1 else ''}coordination ({coordination})")
-        why, route = [], "gls" if coordination == "auto" else coordination
-        paper_sound = False  # the paper route's local Taylor data explain every well (auto only)
-        confining = False  # the GLS restoring degree restricted to odd ones (auto only, `_odd_degree`)
-        speed = _speed(fits, vs, w, masses[i], library) if coordination in ("auto", "joint") else None
-        if coordination == "joint":
-            coord = _joint(fits, xs, vs, ys, w, speed)
-        else:
-            coord = jax.device_get(coordinate(fits, library, method="gls" if coordination == "auto" else coordination,
-                                              throw=False))
-            if coordination == "auto":
-                faults = _paper_route_faults(coord, fits, xs, vs, ys, w, speed)
-                why = faults["restoring"] + faults["damping"] + faults["data"]
-                paper = coord
-                paper_sound = not faults["data"]
-                if faults["data"]:
-                    coord, route = _joint(fits, xs, vs, ys, w, speed), "joint"
-                else:
-                    # A restoring shape that is inadmissible (even degree, turning outward, extra sign changes)
-                    # is the paper's verdict only where redundant local data test it (the over-determined GLS:
-                    # the NES, whose truth turns outward 0.5 spans beyond its outer wells). The exact
-                    # interpolant's shape away from the wells is extrapolation (single-tone arch: a quintic
-                    # from F, F', F'' at two wells turns outward 0.9 spans out and diverges on cross-well
-                    # motion): the joint regression replaces it where it explains every well as well.
-                    unconfirmed = bool(faults["restoring"]) and _redundancy(paper) == 0
-                    # ... and only where the motions the model is used on reach the escape (the 5-cell
-                    # Kresling tip cell's quintic turns outward far beyond its energy bound: the joint
-                    # regression there cost 1.41 % -> 3.56 % restoring error for nothing)
-                    energy = 0.5 * float(masses[i]) * speed**2
-                    reach = [e for e in _sanity.escapes(np.asarray(paper.value.stiffness), np.asarray(fits.equilibrium))
-                             if e["barrier"] < energy]
-                    # An even degree (a term resolved at some wells only) gives way to the highest odd degree
-                    # below it, fitted to all the local conditions, where that one is admissible and the
-                    # conditions do not reject it (`_odd_degree`)
-                    odd = _odd_degree(paper, fits, library, energy) if unconfirmed else None
-                    if odd is not None:
-                        coord = paper = odd
-                        confining, unconfirmed = True, False
-                        why = why + ["replaced by the highest odd degree below it fitted to all the local conditions "
-                                     f"(an even degree cannot confine; chi-squared p = {float(odd.stats['p_r']):.3g})"]
-                    if unconfirmed and not reach:
-                        why = why + ["kept: no motion within the model's energy bound "
-                                     f"({energy:.3g}) reaches an escape"]
-                        unconfirmed = False
-                    if unconfirmed:
-                        cand = _joint(fits, xs, vs, ys, w, speed, settings=_replacement_settings(paper))
-                        ok, reason = _joint_explains_as_well(cand, paper, xs, vs, ys, w)
-                        if ok:
-                            coord, route = cand, "joint"
-                        else:
-                            why = why + [f"kept: {reason}"]
-                    if route == "gls" and faults["damping"]:
-                        coord, route = _joint(fits, xs, vs, ys, w, speed, restoring=paper), "gls + joint damping"
-                    if route != "joint" and unconfirmed:
-                        warnings += _sanity.check_escape_reach(i, np.asarray(paper.value.stiffness),
-                                                               np.asarray(fits.equilibrium), energy)
-                    elif route != "joint" and faults["restoring"] and _redundancy(paper) > 0 and not confining:
-                        why = why + [f"kept: {_redundancy(paper)} local conditions beyond the global law's "
-                                     f"coefficients confirm its shape"]
+        local.append((labels, groups, xs, vs, ys, w, fits, dropped, added))
+    # cells of one design: the well-excited cells lend the curvature the weakly excited ones miss
+    plan, design = [None] * d, None
+    if shared_design is None:
+        shared_design = coordination != "hermite"
+    if shared_design and d > 1:
+        plan, design = _shape_prior.share_curvature([loc[6] for loc in local], library,
+                                                    screen_sigma if screen_sigma is not None else 3.0)
+    for i in range(d):
+        labels, groups, xs, vs, ys, w, fits, dropped, added = local[i]
+        data_fits = fits  # the local fits from the data alone (reported; the resolution report reads them)
+        borrowed, design_why = [], None
+        if plan[i] is not None:
+            fits, borrowed = _borrow(fits, plan[i], xs, vs, ys, w, library)
+        for _attempt in range(2):
+            say(f"{f'DOF {i + 1}/{d}: ' if d > 1 else ''}coordination ({coordination})")
+            why, route = [], "gls" if coordination == "auto" else coordination
+            paper_sound = False  # the paper route's local Taylor data explain every well (auto only)
+            confining = False  # the GLS restoring degree restricted to odd ones (auto only, `_odd_degree`)
+            speed = _speed(fits, vs, w, masses[i], library) if coordination in ("auto", "joint") else None
+            if coordination == "joint":
+                coord = _joint(fits, xs, vs, ys, w, speed)
+            else:
+                coord = jax.device_get(coordinate(fits, library, method="gls" if coordination == "auto" else coordination,
+                                                  confining=any(borrowed), throw=False))
+                if coordination == "auto":
+                    faults = _paper_route_faults(coord, fits, xs, vs, ys, w, speed)
+                    why = faults["restoring"] + faults["damping"] + faults["data"]
+                    paper = coord
+                    paper_sound = not faults["data"]
+                    if faults["data"]:
+                        coord, route = _joint(fits, xs, vs, ys, w, speed), "joint"
+                    else:
+                        # A restoring shape that is inadmissible (even degree, turning outward, extra sign changes)
+                        # is the paper's verdict only where redundant local data test it (the over-determined GLS:
+                        # the NES, whose truth turns outward 0.5 spans beyond its outer wells). The exact
+                        # interpolant's shape away from the wells is extrapolation (single-tone arch: a quintic
+                        # from F, F', F'' at two wells turns outward 0.9 spans out and diverges on cross-well
+                        # motion): the joint regression replaces it where it explains every well as well.
+                        unconfirmed = bool(faults["restoring"]) and _redundancy(paper) == 0
+                        # ... and only where the motions the model is used on reach the escape (the 5-cell
+                        # Kresling tip cell's quintic turns outward far beyond its energy bound: the joint
+                        # regression there cost 1.41 % -> 3.56 % restoring error for nothing)
+                        energy = 0.5 * float(masses[i]) * speed**2
+                        reach = [e for e in _sanity.escapes(np.asarray(paper.value.stiffness), np.asarray(fits.equilibrium))
+                                 if e["barrier"] < energy]
+                        # An even degree (a term resolved at some wells only) gives way to the highest odd degree
+                        # below it, fitted to all the local conditions, where that one is admissible and the
+                        # conditions do not reject it (`_odd_degree`)
+                        odd = _odd_degree(paper, fits, library, energy) if unconfirmed else None
+                        if odd is not None:
+                            coord = paper = odd
+                            confining, unconfirmed = True, False
+                            why = why + ["replaced by the highest odd degree below it fitted to all the local conditions "
+                                         f"(an even degree cannot confine; chi-squared p = {float(odd.stats['p_r']):.3g})"]
+                        if unconfirmed and not reach:
+                            why = why + ["kept: no motion within the model's energy bound "
+                                         f"({energy:.3g}) reaches an escape"]
+                            unconfirmed = False
+                        if unconfirmed:
+                            cand = _joint(fits, xs, vs, ys, w, speed, settings=_replacement_settings(paper))
+                            ok, reason = _joint_explains_as_well(cand, paper, xs, vs, ys, w)
+                            if ok:
+                                coord, route = cand, "joint"
+                            else:
+                                why = why + [f"kept: {reason}"]
+                        if route == "gls" and faults["damping"]:
+                            coord, route = _joint(fits, xs, vs, ys, w, speed, restoring=paper), "gls + joint damping"
+                        if route != "joint" and unconfirmed:
+                            warnings += _sanity.check_escape_reach(i, np.asarray(paper.value.stiffness),
+                                                                   np.asarray(fits.equilibrium), energy)
+                        elif route != "joint" and faults["restoring"] and _redundancy(paper) > 0 and not confining:
+                            why = why + [f"kept: {_redundancy(paper)} local conditions beyond the global law's "
+                                         f"coefficients confirm its shape"]
+            if not (any(borrowed) and route == "joint"):
+                break
+            # the law with the borrowed orders was inadmissible and the joint regression (which sees
+            # only this cell's data) would replace it: the cell goes on alone (torque-free Kresling,
+            # 1 mm, seed 3, cell 4: an outward-turning nonic, then a joint law 86 % off)
+            design_why = "the borrowed orders gave an inadmissible law: " + "; ".join(why[:1])
+            fits, borrowed = data_fits, []
         if coord.result != RESULTS.successful:
             failure.note(coord.result, f"DOF {i}: coordination of the equilibria "
                          f"{np.asarray(fits.equilibrium).round(6).tolist()}, condition numbers "
@@ -687,8 +747,8 @@ def reconstruct(
         names = [r.name for r in recs]
         xcol = [r.x[:, i] for r in recs]
         eq = np.asarray(fits.equilibrium)
-        coef = np.asarray(fits.coef)
-        local_se = np.sqrt(np.clip(np.diagonal(np.asarray(fits.covariance), axis1=1, axis2=2), 0, None))
+        coef = np.asarray(data_fits.coef)
+        local_se = np.sqrt(np.clip(np.diagonal(np.asarray(data_fits.covariance), axis1=1, axis2=2), 0, None))
         local_k = coef[:, k1] if k1 is not None else np.full(len(groups), np.inf)
         swing, swung = _sanity.check_swings(i, names, xcol, labels, eq, local_k)
         warnings += swing + _sanity.check_amplitude(i, names, xcol, labels, eq, skip=swung)
@@ -719,11 +779,11 @@ def reconstruct(
             equilibria=eq,
             local_coef=coef,
             local_stderr=local_se,
-            thresholds=np.asarray(fits.threshold),
+            thresholds=np.asarray(data_fits.threshold),
             recordings_per_well=[[recs[k].name for k in g] for g in groups],
             stats={k: np.asarray(v).tolist() for k, v in coord.stats.items()}
             | {"dropped_velocity_damping": dropped, "restoring_orders_added": added, "coordination": route,
-               "paper_route_rejected": why,
+               "paper_route_rejected": why, "shared_design": _design_stats(design, i, borrowed, design_why),
                "escapes": _sanity.escapes(np.asarray(g.stiffness), eq)},
         ))
     say("training scores, sanity checks, resolution report")
