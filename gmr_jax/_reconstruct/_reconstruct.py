@@ -299,8 +299,7 @@ def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failur
     error 2.75 % against the exact-Taylor oracle's 1.68 %. Each well is refitted on its support plus
     q^(r+1) (at its own threshold, the support kept); the term stays if the refit resolves it,
     and the next order is tried. Returns the fits and, per well, the orders added."""
-    terms = library.terms()
-    idx = [terms.index((STIFFNESS, k)) for k in range(library.restoring_order + 1)]
+    idx = library.indices(STIFFNESS)  # q^0 .. q^r, in order
     added = [[] for _ in range(xs.shape[0])]
     for k in range(xs.shape[0]):
         while True:
@@ -499,6 +498,74 @@ def _calibrated(coord: Solution, fits: LocalFit, library: Library, route: str, p
     return g, calibrate_covariance(fits, library, cov, method=route, confining=confining)
 
 
+def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordination: str, mass: float, i: int,
+                    odd_only: bool = False):
+    """One DOF's coordination route (`reconstruct`'s `coordination`; "auto": the paper route, GLS,
+    checked for inadmissible shapes and faults, replaced or complemented by the joint regression where
+    the module's rules say so). `odd_only`: the GLS takes odd degrees only (a DOF that borrowed
+    orders, `_shape_prior`). Returns `(coord, route, why, paper_sound, confining, warnings)`."""
+    warnings = []
+    why, route = [], "gls" if coordination == "auto" else coordination
+    paper_sound = False  # the paper route's local Taylor data explain every well (auto only)
+    confining = False  # the GLS restoring degree restricted to odd ones (auto only, `_odd_degree`)
+    speed = _speed(fits, vs, w, mass, library) if coordination in ("auto", "joint") else None
+    if coordination == "joint":
+        coord = _joint(fits, xs, vs, ys, w, speed)
+    else:
+        coord = jax.device_get(coordinate(fits, library, method="gls" if coordination == "auto" else coordination,
+                                          confining=odd_only, throw=False))
+        if coordination == "auto":
+            faults = _paper_route_faults(coord, fits, xs, vs, ys, w, speed)
+            why = faults["restoring"] + faults["damping"] + faults["data"]
+            paper = coord
+            paper_sound = not faults["data"]
+            if faults["data"]:
+                coord, route = _joint(fits, xs, vs, ys, w, speed), "joint"
+            else:
+                # A restoring shape that is inadmissible (even degree, turning outward, extra sign changes)
+                # is the paper's verdict only where redundant local data test it (the over-determined GLS:
+                # the NES, whose truth turns outward 0.5 spans beyond its outer wells). The exact
+                # interpolant's shape away from the wells is extrapolation (single-tone arch: a quintic
+                # from F, F', F'' at two wells turns outward 0.9 spans out and diverges on cross-well
+                # motion): the joint regression replaces it where it explains every well as well.
+                unconfirmed = bool(faults["restoring"]) and _redundancy(paper) == 0
+                # ... and only where the motions the model is used on reach the escape (the 5-cell
+                # Kresling tip cell's quintic turns outward far beyond its energy bound: the joint
+                # regression there cost 1.41 % -> 3.56 % restoring error for nothing)
+                energy = 0.5 * float(mass) * speed**2
+                reach = [e for e in _sanity.escapes(np.asarray(paper.value.stiffness), np.asarray(fits.equilibrium))
+                         if e["barrier"] < energy]
+                # An even degree (a term resolved at some wells only) gives way to the highest odd degree
+                # below it, fitted to all the local conditions, where that one is admissible and the
+                # conditions do not reject it (`_odd_degree`)
+                odd = _odd_degree(paper, fits, library, energy) if unconfirmed else None
+                if odd is not None:
+                    coord = paper = odd
+                    confining, unconfirmed = True, False
+                    why = why + ["replaced by the highest odd degree below it fitted to all the local conditions "
+                                 f"(an even degree cannot confine; chi-squared p = {float(odd.stats['p_r']):.3g})"]
+                if unconfirmed and not reach:
+                    why = why + ["kept: no motion within the model's energy bound "
+                                 f"({energy:.3g}) reaches an escape"]
+                    unconfirmed = False
+                if unconfirmed:
+                    cand = _joint(fits, xs, vs, ys, w, speed, settings=_replacement_settings(paper))
+                    ok, reason = _joint_explains_as_well(cand, paper, xs, vs, ys, w)
+                    if ok:
+                        coord, route = cand, "joint"
+                    else:
+                        why = why + [f"kept: {reason}"]
+                if route == "gls" and faults["damping"]:
+                    coord, route = _joint(fits, xs, vs, ys, w, speed, restoring=paper), "gls + joint damping"
+                if route != "joint" and unconfirmed:
+                    warnings += _sanity.check_escape_reach(i, np.asarray(paper.value.stiffness),
+                                                           np.asarray(fits.equilibrium), energy)
+                elif route != "joint" and faults["restoring"] and _redundancy(paper) > 0 and not confining:
+                    why = why + [f"kept: {_redundancy(paper)} local conditions beyond the global law's "
+                                 f"coefficients confirm its shape"]
+    return coord, route, why, paper_sound, confining, warnings
+
+
 def _borrow(fits: LocalFit, plan: list[dict], xs, vs, ys, w, library: Library):
     """Refit the wells of one DOF that borrow orders (`_shape_prior.refit_with_prior`); returns the
     fits and, per well, the orders borrowed."""
@@ -672,73 +739,18 @@ def reconstruct(
         borrowed, design_why = [], None
         if plan[i] is not None:
             fits, borrowed = _borrow(fits, plan[i], xs, vs, ys, w, library)
-        for _attempt in range(2):
-            say(f"{f'DOF {i + 1}/{d}: ' if d > 1 else ''}coordination ({coordination})")
-            why, route = [], "gls" if coordination == "auto" else coordination
-            paper_sound = False  # the paper route's local Taylor data explain every well (auto only)
-            confining = False  # the GLS restoring degree restricted to odd ones (auto only, `_odd_degree`)
-            speed = _speed(fits, vs, w, masses[i], library) if coordination in ("auto", "joint") else None
-            if coordination == "joint":
-                coord = _joint(fits, xs, vs, ys, w, speed)
-            else:
-                coord = jax.device_get(coordinate(fits, library, method="gls" if coordination == "auto" else coordination,
-                                                  confining=any(borrowed), throw=False))
-                if coordination == "auto":
-                    faults = _paper_route_faults(coord, fits, xs, vs, ys, w, speed)
-                    why = faults["restoring"] + faults["damping"] + faults["data"]
-                    paper = coord
-                    paper_sound = not faults["data"]
-                    if faults["data"]:
-                        coord, route = _joint(fits, xs, vs, ys, w, speed), "joint"
-                    else:
-                        # A restoring shape that is inadmissible (even degree, turning outward, extra sign changes)
-                        # is the paper's verdict only where redundant local data test it (the over-determined GLS:
-                        # the NES, whose truth turns outward 0.5 spans beyond its outer wells). The exact
-                        # interpolant's shape away from the wells is extrapolation (single-tone arch: a quintic
-                        # from F, F', F'' at two wells turns outward 0.9 spans out and diverges on cross-well
-                        # motion): the joint regression replaces it where it explains every well as well.
-                        unconfirmed = bool(faults["restoring"]) and _redundancy(paper) == 0
-                        # ... and only where the motions the model is used on reach the escape (the 5-cell
-                        # Kresling tip cell's quintic turns outward far beyond its energy bound: the joint
-                        # regression there cost 1.41 % -> 3.56 % restoring error for nothing)
-                        energy = 0.5 * float(masses[i]) * speed**2
-                        reach = [e for e in _sanity.escapes(np.asarray(paper.value.stiffness), np.asarray(fits.equilibrium))
-                                 if e["barrier"] < energy]
-                        # An even degree (a term resolved at some wells only) gives way to the highest odd degree
-                        # below it, fitted to all the local conditions, where that one is admissible and the
-                        # conditions do not reject it (`_odd_degree`)
-                        odd = _odd_degree(paper, fits, library, energy) if unconfirmed else None
-                        if odd is not None:
-                            coord = paper = odd
-                            confining, unconfirmed = True, False
-                            why = why + ["replaced by the highest odd degree below it fitted to all the local conditions "
-                                         f"(an even degree cannot confine; chi-squared p = {float(odd.stats['p_r']):.3g})"]
-                        if unconfirmed and not reach:
-                            why = why + ["kept: no motion within the model's energy bound "
-                                         f"({energy:.3g}) reaches an escape"]
-                            unconfirmed = False
-                        if unconfirmed:
-                            cand = _joint(fits, xs, vs, ys, w, speed, settings=_replacement_settings(paper))
-                            ok, reason = _joint_explains_as_well(cand, paper, xs, vs, ys, w)
-                            if ok:
-                                coord, route = cand, "joint"
-                            else:
-                                why = why + [f"kept: {reason}"]
-                        if route == "gls" and faults["damping"]:
-                            coord, route = _joint(fits, xs, vs, ys, w, speed, restoring=paper), "gls + joint damping"
-                        if route != "joint" and unconfirmed:
-                            warnings += _sanity.check_escape_reach(i, np.asarray(paper.value.stiffness),
-                                                                   np.asarray(fits.equilibrium), energy)
-                        elif route != "joint" and faults["restoring"] and _redundancy(paper) > 0 and not confining:
-                            why = why + [f"kept: {_redundancy(paper)} local conditions beyond the global law's "
-                                         f"coefficients confirm its shape"]
-            if not (any(borrowed) and route == "joint"):
-                break
+        say(f"{f'DOF {i + 1}/{d}: ' if d > 1 else ''}coordination ({coordination})")
+        coord, route, why, paper_sound, confining, found = _coordinate_dof(
+            fits, xs, vs, ys, w, library, coordination, float(masses[i]), i, odd_only=any(borrowed))
+        if any(borrowed) and route == "joint":
             # the law with the borrowed orders was inadmissible and the joint regression (which sees
             # only this cell's data) would replace it: the cell goes on alone (torque-free Kresling,
             # 1 mm, seed 3, cell 4: an outward-turning nonic, then a joint law 86 % off)
             design_why = "the borrowed orders gave an inadmissible law: " + "; ".join(why[:1])
             fits, borrowed = data_fits, []
+            coord, route, why, paper_sound, confining, found = _coordinate_dof(
+                fits, xs, vs, ys, w, library, coordination, float(masses[i]), i)
+        warnings += found
         if coord.result != RESULTS.successful:
             failure.note(coord.result, f"DOF {i}: coordination of the equilibria "
                          f"{np.asarray(fits.equilibrium).round(6).tolist()}, condition numbers "

@@ -167,8 +167,7 @@ def share_curvature(fits_per_dof, library: Library, n_sigma: float):
     (the prior a_m = rho a_1 / L^(m-1), standard deviation sd); `summary` a dict (`tau`,
     `members`, `excluded` {dof: reason}, `comparisons`).
     """
-    terms = library.terms()
-    idx = [terms.index((STIFFNESS, k)) for k in range(library.restoring_order + 1)]
+    idx = library.indices(STIFFNESS)  # q^0 .. q^r, in order
     d = len(fits_per_dof)
     summary = {"tau": None, "members": [], "excluded": {}, "comparisons": 0}
     plan = [None] * d
@@ -238,8 +237,7 @@ def refit_with_prior(q, v, y, w, library: Library, coef, rss, n_samples, span, b
     weighted by the fit's residual variance, one prior row per borrowed order,
     (a_m - rho a_1 / L^(m-1)) / (sd |a_1| / L^(m-1)). Returns (coef, covariance): the posterior
     mean and covariance (NumPy)."""
-    terms = library.terms()
-    idx = [terms.index((STIFFNESS, k)) for k in range(library.restoring_order + 1)]
+    idx = library.indices(STIFFNESS)  # q^0 .. q^r, in order
     support = np.asarray(coef) != 0
     for m in borrow:
         support[idx[m]] = True
