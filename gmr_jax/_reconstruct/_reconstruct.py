@@ -778,7 +778,8 @@ def reconstruct(
             warnings += _sanity.check_conflict(i, np.asarray(g.stiffness), np.asarray(coord.aux)[:n_k, :n_k],
                                                coord.stats["joint_unconstrained"], float(coord.stats["joint_conflict"]),
                                                float(xall.min()), float(xall.max()))
-        g, cov_i = _calibrated(coord, fits, library, route, paper_sound, confining)
+        # a DOF that borrowed was coordinated with odd degrees only: its discrepancy is that degree choice's
+        g, cov_i = _calibrated(coord, fits, library, route, paper_sound, confining or any(borrowed))
         se = GlobalCoefficients(*(np.pad(np.asarray(a), (0, np.asarray(b).shape[0] - np.asarray(a).shape[0]))
                                   for a, b in zip((se.stiffness, se.velocity_damping, se.position_damping),
                                                   (g.stiffness, g.velocity_damping, g.position_damping))))
