@@ -4,11 +4,16 @@ Importing gmr_jax enables float64 (`jax_enable_x64`) before any test builds an a
 also runs with JAX's strict rank promotion, so an implicit broadcast between arrays of different
 rank is an error here rather than a silent shape bug.
 
-A hang seen in CI (a worker idle for ever in `select_threshold`) was jaxlib 0.10.2's LAPACK batch
-kernels: a vmapped QR hands its batch to XLA's intra-op pool and blocks, and two such calls at
-once fill a 2-thread pool with waiters. The STLS kernels now factorise without LAPACK
-(`gmr_jax/_fit/_householder.py`); pytest-timeout (pyproject) turns any future hang into a named
-failure after 15 min instead of eating CI's 90.
+Two hangs seen in CI (a worker idle for ever in `select_threshold`, then in stop 29's slow tier in
+`coordinate`) were jaxlib 0.10.2's LAPACK batch kernels: a vmapped QR hands its batch to XLA's
+intra-op pool and blocks, and two such calls at once fill a 2-thread pool with waiters. The
+library now factorises without LAPACK wherever a batch arises (`gmr_jax/_fit/_householder.py`;
+`test_no_lapack_batches.py` audits the programs). Beyond that, each xdist worker is pinned to one
+CPU of its own before JAX starts: XLA sizes its pool from the CPU affinity, and with one thread
+jaxlib runs every batch inline, so no kernel of any library can wedge a worker this way (the
+workers already run one per core with single-threaded Eigen; measured: the pool goes from 2
+threads to 1). pytest-timeout (pyproject) turns any other hang into a named failure after 15 min
+instead of eating CI's 90.
 
 Compilation, not execution, is most of the suite's time (measured with jax.monitoring: about
 225 s of XLA backend compilation per worker out of 360 s, 1,800 compilations). So the suite runs
@@ -29,6 +34,11 @@ the compiled code is not shared between tests) but costs nothing.
 """
 
 import os
+
+_WORKER = os.environ.get("PYTEST_XDIST_WORKER", "")
+if _WORKER.startswith("gw") and hasattr(os, "sched_setaffinity"):
+    _cpus = sorted(os.sched_getaffinity(0))
+    os.sched_setaffinity(0, {_cpus[int(_WORKER[2:]) % len(_cpus)]})
 
 _FLAGS = ("--xla_cpu_multi_thread_eigen=false", "--xla_backend_optimization_level=0",
           "--xla_cpu_use_fusion_emitters=false")

@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
+from .._fit._householder import back_substitute, cholesky, householder_qr, singular_values, triangular_inverse
 from ._hermite import confluent_vandermonde, monomial_map, scaling
 
 #: Relative variance floor of the known zeros (terms STLS removed).
@@ -37,9 +38,8 @@ def _whitener(cov: Float[Array, "n o o"], active: Float[Array, "n o"]):
     scale = jnp.max(diag, axis=1, keepdims=True)
     floor = ZERO_FLOOR * jnp.where(scale > 0, scale, 1.0) + 1e-300
     cov = cov + jax.vmap(jnp.diag)(jnp.where(active > 0, floor, 1.0))
-    chol = jnp.linalg.cholesky(cov)
-    eye = jnp.broadcast_to(jnp.eye(o), cov.shape)
-    inv = jax.scipy.linalg.solve_triangular(chol, eye, lower=True)
+    # plain-XLA kernels, not LAPACK's batch kernels (`_fit/_householder.py`: they deadlock jaxlib 0.10.2)
+    inv = jax.vmap(lambda c: triangular_inverse(cholesky(c), lower=True))(cov)
     return inv * active[:, :, None]  # rows of inactive orders vanish
 
 
@@ -70,12 +70,12 @@ def weighted_fit(a_w, b_w, k):
     keep = (p <= k).astype(a_w.dtype)
     mat = jnp.concatenate([a_w * keep[None, :], jnp.diag(1.0 - keep)], axis=0)
     rhs_aug = jnp.concatenate([b_w, jnp.zeros(size)])
-    q, r = jnp.linalg.qr(mat)
-    coef = jax.scipy.linalg.solve_triangular(r, q.T @ rhs_aug, lower=False)
+    r, qtb = householder_qr(mat, rhs_aug)  # `hermite_gls` maps this over the degrees: no LAPACK batches
+    coef = back_substitute(r, qtb)
     chi2 = jnp.sum((a_w @ coef - b_w) ** 2)
-    sv = jnp.linalg.svd(a_w * keep[None, :], compute_uv=False)
+    sv = singular_values(a_w * keep[None, :])  # descending
     nz = jnp.sum(keep)
-    smin = jnp.sort(sv)[::-1][jnp.clip(nz.astype(int) - 1, 0, size - 1)]
+    smin = sv[jnp.clip(nz.astype(int) - 1, 0, size - 1)]
     return coef, chi2, sv[0] / smin
 
 

@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from .._fit._householder import inverse
 from .._topology import _xp
 
 
@@ -94,6 +95,7 @@ def hermite_interpolate(
     colmask = p[None, :] <= degree
     mat = jnp.where(active[:, None], jnp.where(colmask, vand[perm], 0.0), jnp.eye(size))
     b = jnp.where(active, rhs[perm], 0.0)
-    coef_s = jnp.linalg.solve(mat, b)
-    cond = jnp.linalg.norm(mat, 1) * jnp.linalg.norm(jnp.linalg.inv(mat), 1)
+    inv = inverse(mat)  # Householder QR (`_fit/_householder.py`), not a LAPACK batch kernel under vmap
+    coef_s = inv @ b
+    cond = jnp.linalg.norm(mat, 1) * jnp.linalg.norm(inv, 1)
     return monomial_map(c, h, size) @ coef_s, degree, cond

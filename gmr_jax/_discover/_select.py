@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import as_whole_number, check_real
+from .._fit._householder import back_substitute, householder_qr
 
 
 @dataclass(frozen=True)
@@ -78,7 +79,9 @@ def _masked_solve(G, b, mask):
     A = G * (m[:, None] * m[None, :]) + jnp.diag(1.0 - m)
     # tiny ridge relative to the diagonal keeps near-collinear columns solvable
     A = A + 1e-12 * jnp.trace(A) / A.shape[0] * jnp.eye(A.shape[0])
-    return jnp.linalg.solve(A, b * m) * m
+    # Householder QR in plain XLA: `rss`/`cv_sse` run vmapped, and jaxlib 0.10.2's batched LAPACK
+    # kernels can deadlock (`_fit/_householder.py`)
+    return back_substitute(*householder_qr(A, b * m)) * m
 
 
 @jax.jit

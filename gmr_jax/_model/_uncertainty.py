@@ -13,6 +13,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._errors import GMRInputError
+from .._fit._householder import psd_root
 from .._fit._library import signed_power
 from ._model import GlobalModel, coefficients
 
@@ -119,10 +120,11 @@ def force_band(
 
 
 def covariance_root(cov: Float[Array, "dof p p"]) -> Float[Array, "dof p p"]:
-    """R with R R' = cov per DOF (symmetric square root by eigendecomposition: a covariance
+    """R with R R' = cov per DOF (V diag(sqrt(lambda)) by eigendecomposition: a covariance
     with exact zeros, the coefficients no datum moves, is singular and has no Cholesky factor)."""
-    w, u = jnp.linalg.eigh(0.5 * (cov + jnp.swapaxes(cov, -1, -2)))
-    root = u * jnp.sqrt(jnp.clip(w, 0.0))[..., None, :]
+    sym = 0.5 * (cov + jnp.swapaxes(cov, -1, -2))
+    # one-sided Jacobi in plain XLA (`_fit/_householder.py`): jaxlib 0.10.2's batched eigh can deadlock
+    root = jnp.vectorize(psd_root, signature="(p,p)->(p,p)")(sym)
     # coefficients of zero variance stay exactly fixed (no round-off leaks into them)
     return jnp.where((jnp.diagonal(cov, axis1=-2, axis2=-1) > 0)[..., :, None], root, 0.0)
 
