@@ -64,7 +64,7 @@ def weighted_system(nodes, taylor, order, cov):
 
 def weighted_fit(a_w, b_w, k):
     """Least-squares fit of degree `k` (scaled monomials) to the whitened system; returns the
-    coefficients, the chi-squared and the condition number of the kept columns."""
+    coefficients and the chi-squared."""
     size = a_w.shape[1]
     p = jnp.arange(size)
     keep = (p <= k).astype(a_w.dtype)
@@ -73,10 +73,16 @@ def weighted_fit(a_w, b_w, k):
     r, qtb = householder_qr(mat, rhs_aug)  # `hermite_gls` maps this over the degrees: no LAPACK batches
     coef = back_substitute(r, qtb)
     chi2 = jnp.sum((a_w @ coef - b_w) ** 2)
-    sv = singular_values(a_w * keep[None, :])  # descending
-    nz = jnp.sum(keep)
-    smin = sv[jnp.clip(nz.astype(int) - 1, 0, size - 1)]
-    return coef, chi2, sv[0] / smin
+    return coef, chi2
+
+
+def kept_condition(a_w, k):
+    """2-norm condition number of the whitened system's columns 0..k (a diagnostic: computed
+    once, at the chosen degree, and not differentiated)."""
+    size = a_w.shape[1]
+    keep = (jnp.arange(size) <= k).astype(a_w.dtype)
+    sv = singular_values(jax.lax.stop_gradient(a_w * keep[None, :]))  # descending
+    return sv[0] / sv[jnp.clip(jnp.sum(keep).astype(int) - 1, 0, size - 1)]
 
 
 def hermite_gls(
@@ -109,7 +115,12 @@ def hermite_gls(
     m = jnp.sum(active)
     k_herm = n - 1 + jnp.sum(order)
     p = jnp.arange(size)
-    coefs, chi2, cond = jax.vmap(lambda k: weighted_fit(a_w, b_w, k))(p)
+    # Nested least squares from one QR (the fit of degree k uses the first k + 1 columns, and a
+    # Householder QR's first k + 1 steps are that fit's QR): chi2_k = sum_{i > k} (Q^T b)_i^2, no
+    # cancellation; the coefficients are then back-substituted at the chosen degree only
+    r, qtb = householder_qr(a_w, b_w)  # a_w is square (size x size)
+    tail = jnp.cumsum((qtb**2)[::-1])[::-1]
+    chi2 = jnp.concatenate([tail[1:], jnp.zeros(1, tail.dtype)])
     dof = m - p - 1
     pval = jnp.where(dof > 0, jax.scipy.special.gammaincc(jnp.maximum(dof, 1) / 2, chi2 / 2), 0.0)
     # confining: only odd degrees confine (F -> +-inf on both sides); an even K' is never chosen, and
@@ -121,6 +132,7 @@ def hermite_gls(
     fallback = jnp.where(confining & (k_herm % 2 == 0) & jnp.any(below), jnp.max(jnp.where(below, p, 0)), k_herm)
     degree = jnp.where(jnp.any(ok), jnp.argmax(ok), fallback)
     # At K' = K the weighted fit is the exact interpolant (square, nonsingular system).
-    coef_s = coefs[degree]
+    block = (p[:, None] <= degree) & (p[None, :] <= degree)
+    coef_s = back_substitute(jnp.where(block, r, jnp.eye(size, dtype=r.dtype)), jnp.where(p <= degree, qtb, 0.0))
     stats = {"K_hermite": k_herm, "chi2": chi2[degree], "dof": dof[degree], "p": pval[degree]}
-    return monomial_map(c, h, size) @ coef_s, degree, cond[degree], stats
+    return monomial_map(c, h, size) @ coef_s, degree, kept_condition(a_w, degree), stats
