@@ -1,5 +1,6 @@
 """Cells of one design lend their curvature (`_reconstruct/_shape_prior.py`, issue 15)."""
 
+import json
 import warnings
 
 import numpy as np
@@ -181,3 +182,28 @@ def test_two_designs_the_fit_is_the_per_dof_one():
     info = shared.stats["dofs"][1].stats["shared_design"]
     assert not info["used"] and "why" in info
     np.testing.assert_array_equal(np.asarray(shared.value.stiffness), np.asarray(alone.value.stiffness))
+
+
+def test_command_line_records_and_shows_what_was_lent_and_can_switch_it_off(tmp_path, capsys):
+    from gmr_jax._cli._main import main
+
+    paths = []
+    for r in _recordings():
+        paths.append(str(tmp_path / f"{r.name}.npz"))
+        g.save_recording(r, paths[-1])
+    common = ["fit", *paths, "-r", "5", "-d", "3", "--topology", "independent", "--no-figure"]
+    assert main(common + ["--out", str(tmp_path / "on.json")]) == 0
+    assert main(common + ["--out", str(tmp_path / "off.json"), "--no-shared-design"]) == 0
+    on, off = (json.loads((tmp_path / f"{k}.json").read_text()) for k in ("on", "off"))
+    assert off.get("shared_design") is None
+    design = on["shared_design"]
+    assert len(design) == 2 and design[1]["used"] and all(3 in b for b in design[1]["borrowed"])
+    # the file's model is the API's (the command line adds nothing of its own)
+    api = _fit(_recordings())
+    k_file = {(t["dof"], t["order"]): t["coefficient"] for t in on["terms"] if t["physics"] == "stiffness"}
+    for (dof, order), c in k_file.items():
+        assert c == pytest.approx(float(api.value.stiffness[dof, order]), rel=1e-9, abs=1e-12)
+    capsys.readouterr()
+    assert main(["show", str(tmp_path / "on.json")]) == 0
+    out = capsys.readouterr().out
+    assert "Cells of one design" in out and "DOF 1: borrowed well 0: q^" in out

@@ -5,6 +5,7 @@ refusal is an input error (exit 2); a warning is printed to stderr as a `warning
 recorded in the model file under "warnings", and the exit status stays 0 (3 with --strict).
 """
 
+import json
 import sys
 import warnings
 from pathlib import Path
@@ -29,6 +30,10 @@ def register(sub):
                    "its own data or its damping feeds energy in, then the joint regression), gls, hermite (the "
                    "paper's exact interpolant), joint (one penalised regression on all wells' data, admissible "
                    "models only)")
+    f.add_argument("--no-shared-design", action="store_true",
+                   help="chains: each cell alone (by default, cells of one design lend the restoring orders their "
+                   "local fits resolve to the weakly excited cells, as a prior on those cells' own fits; the model "
+                   "file's shared_design says who lent what)")
     f.add_argument("--restoring-order", "-r", type=positive_int, default=5)
     f.add_argument("--damping-order", "-d", type=positive_int, default=5)
     f.add_argument("--threshold", default="auto", help="STLS threshold on normalised coefficients, or 'auto' "
@@ -54,6 +59,33 @@ def data_range(recs):
     model was fitted (`gmr basins`/`actuate` look for wells there when no --x-range is given)."""
     x = np.concatenate([np.asarray(r.x) for r in recs])
     return [[float(x[:, i].min()), float(x[:, i].max())] for i in range(x.shape[1])]
+
+
+def shared_design_of(stats: dict) -> list[dict]:
+    """Per DOF, `reconstruct`'s `stats["shared_design"]` (JSON-ready), or [] where the fit had none
+    (a single DOF, GMC-SINDy, or sharing off)."""
+    rows = [rep.stats.get("shared_design") for rep in stats.get("dofs", [])]
+    if not rows or not any(isinstance(r, dict) and "tau" in r for r in rows):
+        return []
+    return [json.loads(json.dumps(r, default=float)) if isinstance(r, dict) else {} for r in rows]
+
+
+def format_shared_design(design: list[dict]) -> list[str]:
+    """`gmr fit`/`gmr show`: which cells lent which restoring orders to which (cells of one design)."""
+    if not design:
+        return []
+    head = next(r for r in design if "tau" in r)
+    tau = head.get("tau")
+    out = [f"  cells (DOFs) of one design: {head.get('cells')}, design spread tau "
+           f"{'n/a' if tau is None else f'{100 * float(tau):.2g} %'}"]
+    for i, r in enumerate(design):
+        borrowed = r.get("borrowed") or []
+        if r.get("used"):
+            per_well = "; ".join(f"well {k}: q^{', q^'.join(map(str, b))}" for k, b in enumerate(borrowed) if b)
+            out.append(f"    DOF {i}: borrowed {per_well}")
+        elif r.get("why"):
+            out.append(f"    DOF {i}: on its own ({r['why']})")
+    return out
 
 
 def figure_path(out: str, figure: str | None) -> Path:
@@ -94,6 +126,8 @@ def run(args) -> int:
     fn = gmr.gmc_sindy if args.method == "gmc-sindy" else gmr.reconstruct
     if args.method == "gmr":
         kwargs["coordination"] = args.coordination
+        if args.no_shared_design:
+            kwargs["shared_design"] = False
         kwargs["progress"] = lambda msg: stage(f"gmr: {msg}")
     stage(f"{args.method}: local fits and coordination (the first run of a shape compiles)")
     with warnings.catch_warnings():  # printed below as `warning:` lines, once each
@@ -102,6 +136,9 @@ def run(args) -> int:
     model, st = sol.value, sol.stats
     stage(f"writing {args.out}")
     extra = {"resolution": st["resolution"].to_dict()} if "resolution" in st else {}  # gmr show prints it
+    design = shared_design_of(st)
+    if design:
+        extra["shared_design"] = design
     gmr.save_model(model, args.out, method=st["method"],
                    library={"r": lib.restoring_order, "d": lib.damping_order}, training=st["training"],
                    warnings=load_warnings + list(st["warnings"]), data_range=data_range(recs), **extra)
@@ -112,6 +149,8 @@ def run(args) -> int:
         if rep.equilibria.size:
             print(f"  DOF {i}: equilibria {np.round(rep.equilibria, 6).tolist()}, global orders "
                   f"K_r={rep.stats['K_r']}, K_d={rep.stats['K_d']}")
+    for line in format_shared_design(design):
+        print(line)
     for name, sc in st["training"].items():
         print(f"  training {name}: R2 {np.round(sc['r2'], 5).tolist()}, NRMSE {np.round(sc['nrmse'], 5).tolist()}")
     if "resolution" in st:

@@ -17,7 +17,7 @@ from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, term_
 
 #: keys `show` prints in their own sections; any other key is listed at the end.
 _KNOWN = ("format", "topology", "masses", "terms", "method", "library", "training", "warnings", "data_range",
-          "resolution")
+          "resolution", "shared_design")
 
 
 def register(sub):
@@ -175,6 +175,12 @@ def _describe(model, d: dict, name: str, p: int) -> str:
 
         out += ["", "What each well's data resolved (F, F', F'' needed at every well; NO = needed, unresolved):"]
         out += format_resolution(res)
+    design = d.get("shared_design")
+    if isinstance(design, list) and design:
+        from ._fit import format_shared_design
+
+        out += ["", "Cells of one design (restoring orders lent as a prior to the weakly excited cells):"]
+        out += format_shared_design([r if isinstance(r, dict) else {} for r in design])
     warns = d.get("warnings") or []
     out += ["", f"Warnings stored with the model: {len(warns) or 'none'}"]
     out += [f"  - {w}" for w in warns]
