@@ -1,6 +1,7 @@
 """Issue 15, Kresling accuracy targets: what the local data resolve decides the local restoring
 order (`_extend_restoring`) and the global degree is always a confining (odd) one (`hermite_gls`)."""
 
+import math
 import warnings
 
 import jax.numpy as jnp
@@ -94,6 +95,35 @@ def test_confining_gls_never_chooses_an_even_degree():
     assert int(degree) == 6
 
 
+def test_gls_max_degree_gives_the_least_squares_law_of_that_degree():
+    # the conditions pin a nonic whose leading term is negative (it turns outward beyond the data:
+    # torque-free Kresling cells that borrowed q^4, q^5 got such nonics, 0.3-0.43 spans below the
+    # folded well); `reconstruct` then bounds the degree (`_confine_borrowed`): the septic, fitted to
+    # all the conditions by least squares
+    truth = [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 2.0, 0.0, -0.2]
+    nodes = jnp.asarray([-1.0, 1.0])
+    taylor = jnp.asarray([_taylor(truth, x0, 5) for x0 in (-1.0, 1.0)])
+    order = jnp.asarray([4, 5])
+    cov = jnp.broadcast_to(1e-10 * jnp.eye(6), (2, 6, 6))
+    free, degree, _, _ = g.hermite_gls(nodes, taylor, order, cov, confining=True)
+    free = np.trim_zeros(np.asarray(free), "b")
+    assert int(degree) == 9 and free[-1] < 0
+    np.testing.assert_allclose(free, truth, atol=1e-6)
+    coef, degree, _, _ = g.hermite_gls(nodes, taylor, order, cov, confining=True, max_degree=jnp.asarray(8))
+    coef = np.asarray(coef)
+    assert int(degree) == 7 and coef[7] > 0 and np.all(coef[8:] == 0)
+    # the same septic by NumPy: least squares on the 11 Taylor conditions (equal weights)
+    rows, rhs = [], []
+    for x0, r in ((-1.0, 4), (1.0, 5)):
+        for j in range(r + 1):
+            rows.append([math.comb(k, j) * x0 ** (k - j) if k >= j else 0.0 for k in range(8)])
+            rhs.append(_taylor(truth, x0, r)[j])
+    ref = np.linalg.lstsq(np.asarray(rows), np.asarray(rhs), rcond=None)[0]
+    np.testing.assert_allclose(coef[:8], ref, rtol=1e-7, atol=1e-9)
+    x = np.array([-50.0, 50.0])
+    assert np.polynomial.polynomial.polyval(x[1], coef) > 0 > np.polynomial.polynomial.polyval(x[0], coef)
+
+
 @pytest.mark.slow  # torque-free 5-cell training data and two reconstructions (~2 min)
 def test_torque_free_kresling_every_cell_within_three_percent():
     # issue 15: with q^4 of the deployed wells kept where resolved, cells 1-3 reach the exact-
@@ -106,11 +136,15 @@ def test_torque_free_kresling_every_cell_within_three_percent():
         res = g.reconstruct(recs, g.Library(5, 5))
         alone = g.reconstruct(recs, g.Library(5, 5), shared_design=False)
     errs = [g.metrics.restoring_error(res.value, system.truth, c, system.x_range[c]) for c in range(5)]
-    assert max(errs[:3]) < 0.03 and errs[4] < 0.03, errs
+    assert max(errs) < 0.03, errs
     assert 4 in res.stats["dofs"][2].stats["restoring_orders_added"][1]
     assert all(3 in b for b in res.stats["dofs"][4].stats["shared_design"]["borrowed"])
-    # cell 4: the law with the borrowed orders turned outward and the cell went on alone (7 %)
-    assert "inadmissible" in res.stats["dofs"][3].stats["shared_design"]["why"]
+    # cell 4: the nonic with the borrowed orders turned outward within the motions' energy; the septic
+    # fitted to all the local conditions confines (7.1 % when the cell went on alone, stop 29)
+    cell4 = res.stats["dofs"][3].stats
+    assert cell4["shared_design"]["used"] and int(cell4["K_r"]) == 7 and errs[3] < 0.015, (cell4["K_r"], errs)
+    assert any("turns outward" in w and "degree 7" in w for w in cell4["paper_route_rejected"])
+    assert not any(w.startswith("DOF 3: the restoring force turns outward") for w in res.stats["warnings"])
     tip = g.metrics.restoring_error(alone.value, system.truth, 4, system.x_range[4])
     assert tip > 0.25, tip  # per cell, the tip's quintic from F, F', F'' (the oracle's 33 %)
 

@@ -62,21 +62,24 @@ def _taylor_covariances(cov: Float[Array, "n terms terms"], library: Library):
     return cov_a, cov_c
 
 
-def _solve(method, equilibria, taylor, order, cov, alpha, confining=False):
+def _solve(method, equilibria, taylor, order, cov, alpha, confining=False, max_degree=None):
     exact, k_herm, cond = hermite_interpolate(equilibria, taylor, order)
     if method == "hermite":
         return exact, k_herm, cond, {"K_hermite": k_herm}
-    coef, degree, _, stats = hermite_gls(equilibria, taylor, order, cov, alpha, confining=confining)
+    coef, degree, _, stats = hermite_gls(equilibria, taylor, order, cov, alpha, confining=confining,
+                                         max_degree=max_degree)
     # At K' = K the weighted fit is the interpolant itself: take the direct solve.
     return jnp.where(degree == k_herm, exact, coef), degree, cond, stats
 
 
-def _global_from_local(equilibria, coef, cov, library: Library, method: str, alpha: float, confining: bool = False):
+def _global_from_local(equilibria, coef, cov, library: Library, method: str, alpha: float, confining: bool = False,
+                       max_degree=None):
     a, c, vd = _taylor_blocks(coef, library)
     cov_a, cov_c = _taylor_covariances(cov, library)
     r_i = highest_order(a != 0)
     d_i = highest_order(c != 0)
-    stiff, k_r, cond_r, st_r = _solve(method, equilibria, a, r_i, cov_a, alpha, confining=confining)
+    stiff, k_r, cond_r, st_r = _solve(method, equilibria, a, r_i, cov_a, alpha, confining=confining,
+                                      max_degree=max_degree)
     damp, k_d, cond_d, st_d = _solve(method, equilibria, c, d_i, cov_c, alpha)
     b = jnp.mean(vd, axis=0).at[1].set(damp[0])  # Eq. (21); viscous term from the polynomial
     pos = damp.at[0].set(0.0)
@@ -93,6 +96,7 @@ def coordinate(
     method: str = "gls",
     alpha: float = 0.05,
     confining: bool = False,
+    max_degree: Int[Array, ""] | None = None,
     throw: bool = True,
 ) -> Solution:
     """Coordinate local fits into one global model of a DOF (Eqs. 12-21).
@@ -110,6 +114,8 @@ def coordinate(
       see results/README.md for gls.
     - `confining`: with "gls", the restoring force's degree is odd (`hermite_gls`): an even K
       (a term resolved at some wells only) gives way to the highest odd degree below it.
+    - `max_degree`: with "gls", the highest restoring degree allowed (`hermite_gls`; None: no
+      bound; pass a JAX integer to reuse the compiled program across bounds).
 
     **Returns:** a `Solution` with `value` a `GlobalCoefficients`, `aux` the covariance of its
     flattened coefficients (propagated exactly from the local fits' covariances: the map is
@@ -121,11 +127,11 @@ def coordinate(
     if method not in ("gls", "hermite"):
         raise ValueError(f"method must be 'gls' or 'hermite', got {method!r}")
     g, (k_r, k_d, cond_r, cond_d, r_i, d_i, extra) = _global_from_local(
-        x, coef, fits.covariance, library, method, alpha, confining
+        x, coef, fits.covariance, library, method, alpha, confining, max_degree
     )
 
     def flat(c):
-        return _global_from_local(x, c, fits.covariance, library, method, alpha, confining)[0].flat()
+        return _global_from_local(x, c, fits.covariance, library, method, alpha, confining, max_degree)[0].flat()
 
     jac = jax.jacfwd(flat)(coef)  # (G, n, P); supports are fixed by `coef`'s zeros
     cov = jnp.einsum("gnp,npq,hnq->gh", jac, fits.covariance, jac)

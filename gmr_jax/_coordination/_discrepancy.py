@@ -46,14 +46,15 @@ _system = disk_traced(weighted_system)
 _wfit = disk_traced(weighted_fit)
 
 
-def _chosen_and_vectors(nodes, taylor, order, cov, method: str, alpha: float, confining: bool = False):
+def _chosen_and_vectors(nodes, taylor, order, cov, method: str, alpha: float, confining: bool = False,
+                        max_degree=None):
     """The coordination's polynomial (as `coordinate` picks it), its embedded-error vectors
     (m, size) and the Birge ratio of its weighted fit (1 without redundancy)."""
     exact, k_herm, _ = _interpolate(nodes, taylor, order)
     k_herm = int(k_herm)
     size = taylor.shape[0] * taylor.shape[1]
     if method == "gls":
-        coef, degree, _, stats = _gls(nodes, taylor, order, cov, alpha, confining=confining)
+        coef, degree, _, stats = _gls(nodes, taylor, order, cov, alpha, confining=confining, max_degree=max_degree)
         degree = int(degree)
     else:
         coef, degree, stats = exact, k_herm, {}
@@ -74,7 +75,7 @@ def _chosen_and_vectors(nodes, taylor, order, cov, method: str, alpha: float, co
 
 
 def discrepancy(fits: LocalFit, library: Library, *, method: str = "gls", alpha: float = 0.05,
-                confining: bool = False):
+                confining: bool = False, max_degree=None):
     """The embedded-error vectors and Birge ratios of one DOF's paper route (module docstring):
     `{"restoring": (vectors, birge), "damping": (vectors, birge)}`, each vector the monomial
     coefficients of a polynomial (the restoring force F, the damping polynomial C of
@@ -82,7 +83,7 @@ def discrepancy(fits: LocalFit, library: Library, *, method: str = "gls", alpha:
     a, c, _ = _taylor_blocks(fits.coef, library)
     cov_a, cov_c = _taylor_covariances(fits.covariance, library)
     x = fits.equilibrium
-    out = {"restoring": _chosen_and_vectors(x, a, highest_order(a != 0), cov_a, method, alpha, confining)}
+    out = {"restoring": _chosen_and_vectors(x, a, highest_order(a != 0), cov_a, method, alpha, confining, max_degree)}
     out["damping"] = (_chosen_and_vectors(x, c, highest_order(c != 0), cov_c, method, alpha)
                       if c.shape[1] > 0 else ([], 1.0))
     return out
@@ -90,7 +91,7 @@ def discrepancy(fits: LocalFit, library: Library, *, method: str = "gls", alpha:
 
 def calibrate_covariance(fits: LocalFit, library: Library, covariance, *, method: str = "gls",
                          alpha: float = 0.05, restoring: bool = True, damping: bool = True,
-                         confining: bool = False) -> np.ndarray:
+                         confining: bool = False, max_degree=None) -> np.ndarray:
     """The calibrated covariance of one DOF's global coefficients from the paper's route
     (`coordinate` with `method`, `alpha`; flat layout of `GlobalCoefficients.flat`):
     `covariance` (the propagated one, `coordinate`'s aux) with its restoring and damping blocks
@@ -102,7 +103,7 @@ def calibrate_covariance(fits: LocalFit, library: Library, covariance, *, method
     a, c, _ = _taylor_blocks(fits.coef, library)
     ns = a.shape[0] * a.shape[1]
     nv = library.damping_order + 1
-    disc = discrepancy(fits, library, method=method, alpha=alpha, confining=confining)
+    disc = discrepancy(fits, library, method=method, alpha=alpha, confining=confining, max_degree=max_degree)
     scale = np.ones(cov.shape[0])
     extra = np.zeros_like(cov)
     blocks = []

@@ -11,9 +11,13 @@ Rule: K' is the smallest degree, at least 2n - 1 for n wells (room for the n - 1
 them) and below K, whose weighted residual is consistent with the local covariances
 (chi-squared with m - K' - 1 degrees of freedom, p > `alpha`); if none is, K' = K and the
 solution is the paper's exact Hermite interpolant. For a restoring force (`confining=True`; `reconstruct`
-uses it where the paper route's degree is even) only odd degrees count (only they confine: F -> +-inf on both sides), and
-an even K (a term resolved at some wells only) gives way to the highest odd degree below it,
-fitted to all the conditions. Known zeros (terms STLS removed) carry a
+uses it where the paper route's degree is even, and for a cell that borrowed orders from cells of its
+design) only odd degrees count (only they can confine, with a positive leading coefficient: F -> +-inf on
+both sides); `reconstruct` checks the sign where it matters: a cell that borrowed orders and whose law
+turns outward within the reach of its motions takes a lower degree (`max_degree`). The smallest
+accepted degree, at most `max_degree`; where none is accepted, the exact interpolant (K), or, for
+a confining law of even K or K above `max_degree`, the highest odd degree below it, fitted to all
+the conditions. Known zeros (terms STLS removed) carry a
 variance floor far below the kept terms', so they act as (nearly) hard constraints, as in the
 Hermite solve.
 """
@@ -92,6 +96,7 @@ def hermite_gls(
     cov: Float[Array, "n orders orders"],
     alpha: float = 0.05,
     confining: bool = False,
+    max_degree: Int[Array, ""] | int | None = None,
 ):
     """Global polynomial from local Taylor coefficients and their covariances (Eqs. 15-18
     as generalised least squares; module docstring for the degree rule).
@@ -102,6 +107,8 @@ def hermite_gls(
     - `cov`: covariance of each point's Taylor vector (n, r + 1, r + 1).
     - `alpha`: level of the chi-squared test.
     - `confining`: the polynomial is a restoring force: odd degrees only (module docstring).
+    - `max_degree`: the highest degree allowed (None: no bound; a traced integer does not
+      recompile); an exact interpolant of higher degree gives way to the highest allowed one.
       Kresling chain, 1 mm, seed 3, cell 4 (F''' resolved at the deployed well only, local
       orders 2 and 3): the exact sextic was 6.55 % off and cannot confine, the quintic 1.3 %.
 
@@ -126,10 +133,12 @@ def hermite_gls(
     # confining: only odd degrees confine (F -> +-inf on both sides); an even K' is never chosen, and
     # an even K (a term resolved at one well only: Kresling 1 mm seed 3, cell 4, local orders 2 and 3, the
     # exact sextic 6.55 % off) gives way to the highest odd degree below it, fitted to all.
+    cap = p <= (size if max_degree is None else max_degree)
     odd = ((p % 2 == 1) | (not confining)) & (p >= 2 * n - 1)
-    ok = (pval > alpha) & odd & (p < k_herm)
-    below = odd & (p < k_herm)
-    fallback = jnp.where(confining & (k_herm % 2 == 0) & jnp.any(below), jnp.max(jnp.where(below, p, 0)), k_herm)
+    ok = (pval > alpha) & odd & (p < k_herm) & cap
+    below = odd & (p < k_herm) & cap
+    lower = confining & (k_herm % 2 == 0) | ~cap[jnp.clip(k_herm, 0, size - 1)]
+    fallback = jnp.where(lower & jnp.any(below), jnp.max(jnp.where(below, p, 0)), k_herm)
     degree = jnp.where(jnp.any(ok), jnp.argmax(ok), fallback)
     # At K' = K the weighted fit is the exact interpolant (square, nonsingular system).
     block = (p[:, None] <= degree) & (p[None, :] <= degree)

@@ -299,6 +299,7 @@ def covariance_entries(model: GlobalModel) -> list[dict] | None:
     if model.covariance is None:
         return None
     cov = np.asarray(model.covariance)
+    cov = 0.5 * (cov + np.swapaxes(cov, 1, 2))  # exactly symmetric on file (the reader checks it)
     index = coefficient_index(model)
     out = []
     for i in range(cov.shape[0]):
