@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from .._fit._householder import inverse
+from .._fit._householder import back_substitute, householder_qr, inverse
 from .._topology import _xp
 
 
@@ -95,7 +95,8 @@ def hermite_interpolate(
     colmask = p[None, :] <= degree
     mat = jnp.where(active[:, None], jnp.where(colmask, vand[perm], 0.0), jnp.eye(size))
     b = jnp.where(active, rhs[perm], 0.0)
-    inv = inverse(mat)  # Householder QR (`_fit/_householder.py`), not a LAPACK batch kernel under vmap
-    coef_s = inv @ b
-    cond = jnp.linalg.norm(mat, 1) * jnp.linalg.norm(inv, 1)
+    # Householder QR and back substitution (`_fit/_householder.py`), not a LAPACK batch kernel under vmap;
+    # the coefficients from a direct solve (not inverse @ b), the inverse only for the condition number
+    coef_s = back_substitute(*householder_qr(mat, b))
+    cond = jnp.linalg.norm(mat, 1) * jnp.linalg.norm(inverse(jax.lax.stop_gradient(mat)), 1)
     return monomial_map(c, h, size) @ coef_s, degree, cond
