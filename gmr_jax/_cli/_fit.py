@@ -16,7 +16,7 @@ from .._errors import GMRInputError
 from .._reconstruct._sanity import GMRDataWarning
 from ._args import add_columns_option, load_recordings, positive_int
 from ._progress import stage
-from ._show import _term_table
+from ._show import _term_table, format_shared_design
 
 
 def register(sub):
@@ -68,24 +68,6 @@ def shared_design_of(stats: dict) -> list[dict]:
     if not rows or not any(isinstance(r, dict) and "tau" in r for r in rows):
         return []
     return [json.loads(json.dumps(r, default=float)) if isinstance(r, dict) else {} for r in rows]
-
-
-def format_shared_design(design: list[dict]) -> list[str]:
-    """`gmr fit`/`gmr show`: which cells lent which restoring orders to which (cells of one design)."""
-    if not design:
-        return []
-    head = next(r for r in design if "tau" in r)
-    tau = head.get("tau")
-    out = [f"  cells (DOFs) of one design: {head.get('cells')}, design spread tau "
-           f"{'n/a' if tau is None else f'{100 * float(tau):.2g} %'}"]
-    for i, r in enumerate(design):
-        borrowed = r.get("borrowed") or []
-        if r.get("used"):
-            per_well = "; ".join(f"well {k}: q^{', q^'.join(map(str, b))}" for k, b in enumerate(borrowed) if b)
-            out.append(f"    DOF {i}: borrowed {per_well}")
-        elif r.get("why"):
-            out.append(f"    DOF {i}: on its own ({r['why']})")
-    return out
 
 
 def figure_path(out: str, figure: str | None) -> Path:

@@ -20,6 +20,24 @@ _KNOWN = ("format", "topology", "masses", "terms", "method", "library", "trainin
           "resolution", "shared_design")
 
 
+def format_shared_design(design: list[dict]) -> list[str]:
+    """`gmr fit`/`gmr show`: which cells lent which restoring orders to which (cells of one design)."""
+    if not design:
+        return []
+    head = next((r for r in design if "tau" in r), {})  # a hand-edited file may lack it
+    tau = head.get("tau")
+    out = [f"  cells (DOFs) of one design: {head.get('cells')}, design spread tau "
+           f"{'n/a' if tau is None else f'{100 * float(tau):.2g} %'}"]
+    for i, r in enumerate(design):
+        borrowed = r.get("borrowed") or []
+        if r.get("used"):
+            per_well = "; ".join(f"well {k}: q^{', q^'.join(map(str, b))}" for k, b in enumerate(borrowed) if b)
+            out.append(f"    DOF {i}: borrowed {per_well}")
+        elif r.get("why"):
+            out.append(f"    DOF {i}: on its own ({r['why']})")
+    return out
+
+
 def register(sub):
     p = sub.add_parser("show", help="print a model file: equations with standard errors, wells and their "
                        "stability, energy barriers, training metadata and warnings")
@@ -177,8 +195,6 @@ def _describe(model, d: dict, name: str, p: int) -> str:
         out += format_resolution(res)
     design = d.get("shared_design")
     if isinstance(design, list) and design:
-        from ._fit import format_shared_design
-
         out += ["", "Cells of one design (restoring orders lent as a prior to the weakly excited cells):"]
         out += format_shared_design([r if isinstance(r, dict) else {} for r in design])
     warns = d.get("warnings") or []

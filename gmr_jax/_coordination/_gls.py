@@ -66,18 +66,21 @@ def weighted_system(nodes, taylor, order, cov):
     return a_w, b_w, c, h, active
 
 
-def weighted_fit(a_w, b_w, k):
-    """Least-squares fit of degree `k` (scaled monomials) to the whitened system; returns the
-    coefficients and the chi-squared."""
-    size = a_w.shape[1]
+def nested_fit(r, qtb, k):
+    """The least-squares coefficients on columns 0..k from the QR of all columns (R, Q^T b): the
+    first k + 1 Householder steps are that smaller problem's QR, so its solution is R's leading
+    block back-substituted (zeros above k)."""
+    size = r.shape[0]
     p = jnp.arange(size)
-    keep = (p <= k).astype(a_w.dtype)
-    mat = jnp.concatenate([a_w * keep[None, :], jnp.diag(1.0 - keep)], axis=0)
-    rhs_aug = jnp.concatenate([b_w, jnp.zeros(size)])
-    r, qtb = householder_qr(mat, rhs_aug)  # `hermite_gls` maps this over the degrees: no LAPACK batches
-    coef = back_substitute(r, qtb)
-    chi2 = jnp.sum((a_w @ coef - b_w) ** 2)
-    return coef, chi2
+    block = (p[:, None] <= k) & (p[None, :] <= k)
+    return back_substitute(jnp.where(block, r, jnp.eye(size, dtype=r.dtype)), jnp.where(p <= k, qtb, 0.0))
+
+
+def weighted_fit(a_w, b_w, k):
+    """Least-squares fit of degree `k` (scaled monomials) to the whitened (square) system; returns
+    the coefficients and the chi-squared."""
+    coef = nested_fit(*householder_qr(a_w, b_w), k)
+    return coef, jnp.sum((a_w @ coef - b_w) ** 2)
 
 
 def kept_condition(a_w, k):
@@ -107,10 +110,10 @@ def hermite_gls(
     - `cov`: covariance of each point's Taylor vector (n, r + 1, r + 1).
     - `alpha`: level of the chi-squared test.
     - `confining`: the polynomial is a restoring force: odd degrees only (module docstring).
-    - `max_degree`: the highest degree allowed (None: no bound; a traced integer does not
-      recompile); an exact interpolant of higher degree gives way to the highest allowed one.
       Kresling chain, 1 mm, seed 3, cell 4 (F''' resolved at the deployed well only, local
       orders 2 and 3): the exact sextic was 6.55 % off and cannot confine, the quintic 1.3 %.
+    - `max_degree`: the highest degree allowed (None: no bound; a traced integer does not
+      recompile); an exact interpolant of higher degree gives way to the highest allowed one.
 
     **Returns:** `(coeffs, degree, cond, stats)`: monomial coefficients (zero above the degree),
     the chosen degree K', the condition number of the scaled weighted system at K', and
@@ -141,7 +144,6 @@ def hermite_gls(
     fallback = jnp.where(lower & jnp.any(below), jnp.max(jnp.where(below, p, 0)), k_herm)
     degree = jnp.where(jnp.any(ok), jnp.argmax(ok), fallback)
     # At K' = K the weighted fit is the exact interpolant (square, nonsingular system).
-    block = (p[:, None] <= degree) & (p[None, :] <= degree)
-    coef_s = back_substitute(jnp.where(block, r, jnp.eye(size, dtype=r.dtype)), jnp.where(p <= degree, qtb, 0.0))
+    coef_s = nested_fit(r, qtb, degree)
     stats = {"K_hermite": k_herm, "chi2": chi2[degree], "dof": dof[degree], "p": pval[degree]}
     return monomial_map(c, h, size) @ coef_s, degree, kept_condition(a_w, degree), stats

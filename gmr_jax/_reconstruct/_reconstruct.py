@@ -422,7 +422,7 @@ def _odd_degree(paper: Solution, fits: LocalFit, library: Library, energy: float
     stiff = np.asarray(alt.value.stiffness)
     if any("changes sign" in f for f in restoring_faults(stiff, eq)):
         return None
-    if any(e["barrier"] < energy for e in _sanity.escapes(stiff, eq)):
+    if _sanity.reachable_escapes(stiff, eq, energy):
         return None
     if float(alt.stats["dof_r"]) > 0 and not float(alt.stats["p_r"]) >= ODD_DEGREE_MIN_P:
         return None
@@ -511,26 +511,22 @@ def _confine_borrowed(coord: Solution, fits: LocalFit, library: Library, energy:
     truth, against 1.0-2.3 % for the nonics. Returns `(coord, notes)`; a lowered law carries its
     bound in `stats["max_degree_r"]` (the covariance calibration uses the same choice)."""
     eq = np.asarray(fits.equilibrium)
-    n = eq.size
-
-    def reach(c):
-        return [e for e in _sanity.escapes(np.asarray(c.value.stiffness), eq) if e["barrier"] < energy]
-
     first, notes = coord, []
-    while reach(coord) and int(coord.stats["K_r"]) > 2 * n - 1:
+    reach = _sanity.reachable_escapes(coord.value.stiffness, eq, energy)
+    while reach and int(coord.stats["K_r"]) > 2 * eq.size - 1:
         deg = int(coord.stats["K_r"])
         cap = deg - 1 if deg % 2 == 0 else deg - 2
         alt = jax.device_get(coordinate(fits, library, method="gls", confining=True, max_degree=jnp.asarray(cap),
                                         throw=False))
         if alt.result != RESULTS.successful or not np.all(np.isfinite(np.asarray(alt.value.flat()))):
             break
-        esc = reach(coord)[0]
-        notes.append(f"the borrowed law of degree {deg} turns outward at x = {esc['x']:.4g} with a barrier "
-                     f"({esc['barrier']:.3g}) within the energy bound ({energy:.3g}): degree {int(alt.stats['K_r'])} "
-                     f"fitted to all the local conditions instead")
+        notes.append(f"the borrowed law of degree {deg} turns outward at x = {reach[0]['x']:.4g} with a barrier "
+                     f"({reach[0]['barrier']:.3g}) within the energy bound ({energy:.3g}): degree "
+                     f"{int(alt.stats['K_r'])} fitted to all the local conditions instead")
         alt.stats["max_degree_r"] = cap
         coord = alt
-    if reach(coord):  # no lower degree confines: the law as it was (its warning follows)
+        reach = _sanity.reachable_escapes(coord.value.stiffness, eq, energy)
+    if reach:  # no lower degree confines: the law as it was (its warning follows)
         return first, []
     return coord, notes
 
@@ -546,6 +542,7 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
     paper_sound = False  # the paper route's local Taylor data explain every well (auto only)
     confining = False  # the GLS restoring degree restricted to odd ones (auto only, `_odd_degree`)
     speed = _speed(fits, vs, w, mass, library) if coordination in ("auto", "joint") else None
+    energy = None if speed is None else 0.5 * float(mass) * speed**2  # the model's energy bound
     lowered = []  # a borrowed law lowered to a degree that confines (`_confine_borrowed`)
     if coordination == "joint":
         coord = _joint(fits, xs, vs, ys, w, speed)
@@ -553,7 +550,7 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
         coord = jax.device_get(coordinate(fits, library, method="gls" if coordination == "auto" else coordination,
                                           confining=odd_only, throw=False))
         if coordination == "auto" and odd_only:
-            coord, lowered = _confine_borrowed(coord, fits, library, 0.5 * float(mass) * speed**2)
+            coord, lowered = _confine_borrowed(coord, fits, library, energy)
         if coordination == "auto":
             faults = _paper_route_faults(coord, fits, xs, vs, ys, w, speed)
             why = faults["restoring"] + faults["damping"] + faults["data"]
@@ -572,9 +569,7 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                 # ... and only where the motions the model is used on reach the escape (the 5-cell
                 # Kresling tip cell's quintic turns outward far beyond its energy bound: the joint
                 # regression there cost 1.41 % -> 3.56 % restoring error for nothing)
-                energy = 0.5 * float(mass) * speed**2
-                reach = [e for e in _sanity.escapes(np.asarray(paper.value.stiffness), np.asarray(fits.equilibrium))
-                         if e["barrier"] < energy]
+                reach = _sanity.reachable_escapes(paper.value.stiffness, fits.equilibrium, energy)
                 # An even degree (a term resolved at some wells only) gives way to the highest odd degree
                 # below it, fitted to all the local conditions, where that one is admissible and the
                 # conditions do not reject it (`_odd_degree`)
@@ -820,7 +815,6 @@ def reconstruct(
                                                float(xall.min()), float(xall.max()))
         # a DOF that borrowed was coordinated with odd degrees only: its discrepancy is that degree choice's
         g, cov_i = _calibrated(coord, fits, library, route, paper_sound, confining or any(borrowed))
-        cov_i = 0.5 * (cov_i + cov_i.T)  # symmetric to the last bit (J C J^T and its sums are, up to round-off)
         se = GlobalCoefficients(*(np.pad(np.asarray(a), (0, np.asarray(b).shape[0] - np.asarray(a).shape[0]))
                                   for a, b in zip((se.stiffness, se.velocity_damping, se.position_damping),
                                                   (g.stiffness, g.velocity_damping, g.position_damping))))

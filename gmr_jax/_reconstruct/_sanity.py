@@ -394,22 +394,27 @@ def escapes(stiffness, equilibria) -> list[dict]:
     return out
 
 
+def reachable_escapes(stiffness, equilibria, energy: float) -> list[dict]:
+    """The `escapes` whose barrier lies below `energy` (the bound the model is used on): the
+    outward turns its motions can reach."""
+    return [e for e in escapes(np.asarray(stiffness), np.asarray(equilibria)) if e["barrier"] < energy]
+
+
 def check_escape_reach(dof: int, stiffness, equilibria, energy: float) -> list[str]:
     """Rule 9 (d), for a coordination kept although its restoring force turns outward and no
     redundant local datum confirms that shape (the exact interpolant of the wells' Taylor
     coefficients, extrapolated): warn where a motion with energy up to `energy` (the bound the
     model is used on, 1/2 m v_max^2 of `_reconstruct._speed`) gets past the escape point."""
     out = []
-    for e in escapes(stiffness, equilibria):
-        if e["barrier"] < energy:
-            out.append(
-                f"DOF {dof}: the restoring force turns outward beyond x = {_g(e['x'])} (F -> "
-                f"{'-' if e['side'] == '+' else '+'}inf as x -> {e['side']}inf) and a motion with energy "
-                f"{_g(e['barrier'])} above its outer well gets there and runs away, below the energies the model is "
-                f"used on (up to {_g(energy)}); no recorded datum confirms that shape (the global law interpolates the "
-                f"wells' local terms exactly) and no admissible alternative explains every well's data as well: do "
-                f"not trust simulations that leave the recorded range; lower the orders, or record further out"
-            )
+    for e in reachable_escapes(stiffness, equilibria, energy):
+        out.append(
+            f"DOF {dof}: the restoring force turns outward beyond x = {_g(e['x'])} (F -> "
+            f"{'-' if e['side'] == '+' else '+'}inf as x -> {e['side']}inf) and a motion with energy "
+            f"{_g(e['barrier'])} above its outer well gets there and runs away, below the energies the model is "
+            f"used on (up to {_g(energy)}); no recorded datum confirms that shape (the global law interpolates the "
+            f"wells' local terms exactly) and no admissible alternative explains every well's data as well: do "
+            f"not trust simulations that leave the recorded range; lower the orders, or record further out"
+        )
     return out
 
 
