@@ -10,8 +10,8 @@ import pytest
 
 import gmr_jax as g
 from gmr_jax._fit._library import STIFFNESS
-from gmr_jax._reconstruct._reconstruct import (_extend_restoring, _fit_wells, _Failure, _least_risk_degree, _span_curve,
-                                              low_order_terms)
+from gmr_jax._reconstruct._degree import least_risk_degree, span_curve
+from gmr_jax._reconstruct._reconstruct import _extend_restoring, _fit_wells, _Failure, low_order_terms
 
 
 def _wells(a4, n=4000, amp=0.08, noise=1e-4, seed=0):
@@ -99,7 +99,7 @@ def test_confining_gls_never_chooses_an_even_degree():
 def test_gls_max_degree_gives_the_least_squares_law_of_that_degree():
     # the conditions pin a nonic whose leading term is negative (it turns outward beyond the data:
     # torque-free Kresling cells that borrowed q^4, q^5 got such nonics, 0.3-0.43 spans below the
-    # folded well); `reconstruct` then bounds the degree (`_confine_borrowed`): the septic, fitted to
+    # folded well); `reconstruct` then bounds the degree (`_degree.confine_borrowed`): the septic, fitted to
     # all the conditions by least squares
     truth = [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 2.0, 0.0, -0.2]
     nodes = jnp.asarray([-1.0, 1.0])
@@ -147,7 +147,7 @@ def _noisy_high_orders(c, rel4, z, lib):
 
 
 def test_least_risk_estimate_of_a_lower_degree_is_unbiased():
-    # `_least_risk_degree` rests on: the degree-7 GLS law is the projection of the exact nonic, so
+    # `least_risk_degree` rests on: the degree-7 GLS law is the projection of the exact nonic, so
     # (F_7 - F_9)^2 - var F_9 + 2 var F_7 estimates E (F_7 - F)^2 without bias. Monte Carlo over the
     # conditions' noise (200 draws): the mean estimate equals the mean actual squared error
     lib = g.Library(5, 1)
@@ -159,8 +159,8 @@ def test_least_risk_estimate_of_a_lower_degree_is_unbiased():
         top = g.coordinate(fits, lib, method="gls", confining=True)
         low = g.coordinate(fits, lib, method="gls", confining=True, max_degree=jnp.asarray(7))
         assert int(top.stats["K_r"]) == 9 and int(low.stats["K_r"]) == 7
-        f_top, v_top = _span_curve(top, x)
-        f_low, v_low = _span_curve(low, x)
+        f_top, v_top = span_curve(top, x)
+        f_low, v_low = span_curve(low, x)
         est.append(np.mean((f_low - f_top) ** 2 - v_top + 2 * v_low))
         act.append(np.mean((f_low - np.polynomial.polynomial.polyval(x, truth)) ** 2))
     diff = np.asarray(est) - np.asarray(act)
@@ -179,15 +179,15 @@ def test_least_risk_degree_lowers_only_where_the_high_orders_are_uncertain():
     top = g.coordinate(fits, lib, method="gls", confining=True)
     low = g.coordinate(fits, lib, method="gls", confining=True, max_degree=jnp.asarray(7))
     assert int(top.stats["K_r"]) == 9 and float(low.stats["p_r"]) < 0.05
-    best, notes = _least_risk_degree(top, fits, lib, 10.0)
+    best, notes = least_risk_degree(top, fits, lib, 10.0)
     assert int(best.stats["K_r"]) == 7 and int(best.stats["max_degree_r"]) == 7 and "degree 7 instead of 9" in notes[0]
     f = np.polynomial.polynomial.polyval(x, truth)
-    err = [np.sqrt(np.mean((_span_curve(s, x)[0] - f) ** 2)) for s in (top, best)]
+    err = [np.sqrt(np.mean((span_curve(s, x)[0] - f) ** 2)) for s in (top, best)]
     assert err[1] < 0.2 * err[0], err
     # every condition precise: the nonic is kept
     fits, truth = _noisy_high_orders(0.05, 1e-4, np.zeros((2, 5)), lib)
     top = g.coordinate(fits, lib, method="gls", confining=True)
-    best, notes = _least_risk_degree(top, fits, lib, 10.0)
+    best, notes = least_risk_degree(top, fits, lib, 10.0)
     assert best is top and notes == []
 
 
@@ -240,7 +240,7 @@ def test_nominal_kresling_one_well_term_gives_an_odd_quintic_not_the_exact_sexti
 def test_torque_free_kresling_borrowed_nonic_gives_way_to_the_septic_of_lower_risk():
     # issue 15: 1 mm seed 1, cells 4-5 borrowed q^2..q^4; the exact nonics through the borrowed q^4
     # (3-4 % off the truth: the donor's truncation bias) were 3.83 / 2.70 % off; the septics, of lower
-    # estimated risk over the span, 1.34 / 1.37 % (`_least_risk_degree`)
+    # estimated risk over the span, 1.34 / 1.37 % (`least_risk_degree`)
     system = g.systems.kresling5(twist="torque_free", damping_ratio=g.systems.KRESLING5_DEPLOYMENT_DAMPING)
     recs = g.systems.make_recordings(system, 1e-3, snr_db=60, seed=1)
     with warnings.catch_warnings():
