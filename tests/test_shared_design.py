@@ -198,6 +198,9 @@ def test_command_line_records_and_shows_what_was_lent_and_can_switch_it_off(tmp_
     assert off.get("shared_design") is None
     design = on["shared_design"]
     assert len(design) == 2 and design[1]["used"] and all(3 in b for b in design[1]["borrowed"])
+    # the borrowing DOF's global degree is recorded: the file's own polynomial has it
+    degree = max(t["order"] for t in on["terms"] if t["physics"] == "stiffness" and t["dof"] == 1 and t["coefficient"])
+    assert design[1]["degree"] == degree and degree % 2 == 1 and isinstance(design[1]["degree_notes"], list)
     # the file's model is the API's (the command line adds nothing of its own)
     api = _fit(_recordings())
     k_file = {(t["dof"], t["order"]): t["coefficient"] for t in on["terms"] if t["physics"] == "stiffness"}
@@ -207,3 +210,4 @@ def test_command_line_records_and_shows_what_was_lent_and_can_switch_it_off(tmp_
     assert main(["show", str(tmp_path / "on.json")]) == 0
     out = capsys.readouterr().out
     assert "Cells of one design" in out and "DOF 1: borrowed well 0: q^" in out
+    assert f"; global degree {degree}" in out

@@ -32,7 +32,9 @@ def format_shared_design(design: list[dict]) -> list[str]:
         borrowed = r.get("borrowed") or []
         if r.get("used"):
             per_well = "; ".join(f"well {k}: q^{', q^'.join(map(str, b))}" for k, b in enumerate(borrowed) if b)
-            out.append(f"    DOF {i}: borrowed {per_well}")
+            degree = f"; global degree {r['degree']}" if "degree" in r else ""
+            out.append(f"    DOF {i}: borrowed {per_well}{degree}")
+            out += [f"      {note}" for note in r.get("degree_notes") or []]
         elif r.get("why"):
             out.append(f"    DOF {i}: on its own ({r['why']})")
     return out

@@ -129,8 +129,9 @@ def least_risk_degree(coord: Solution, fits: LocalFit, library: Library, energy:
             best, best_risk = alt, risk
     if best is not coord:
         scale = float(np.max(np.abs(f_top)))
-        notes.append(f"degree {int(best.stats['K_r'])} instead of {top}: its estimated mean squared error over the "
-                     f"span is lower (rms {np.sqrt(max(best_risk, 0.0)) / scale:.3g} against "
-                     f"{np.sqrt(float(np.mean(v_top))) / scale:.3g} of the force scale; the borrowed orders' "
-                     f"uncertainty is amplified by the higher degree)")
+        low = (f"{100 * np.sqrt(best_risk) / scale:.2g} %" if best_risk > 0
+               else "within the estimate's noise of 0")  # the unbiased estimate can fall below 0
+        notes.append(f"degree {int(best.stats['K_r'])} instead of {top}: its estimated rms error over the span is "
+                     f"lower ({low} against {100 * np.sqrt(float(np.mean(v_top))) / scale:.2g} % of the force "
+                     f"scale: the exact degree {top} passes the borrowed orders' error on, amplified)")
     return best, notes

@@ -532,6 +532,8 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                 elif route != "joint" and faults["restoring"] and redundancy(paper) > 0 and not confining:
                     why = why + [f"kept: {redundancy(paper)} local conditions beyond the global law's "
                                  f"coefficients confirm its shape"]
+    if lowered:
+        coord.stats["degree_notes"] = lowered  # why a borrowed law has the degree it has (`_degree`)
     return coord, route, why + lowered, paper_sound, confining, warnings
 
 
@@ -551,13 +553,18 @@ def _borrow(fits: LocalFit, plan: list[dict], xs, vs, ys, w, library: Library):
     return eqx.tree_at(lambda f: (f.coef, f.covariance), fits, (coef, cov)), borrowed
 
 
-def _design_stats(design: dict | None, i: int, borrowed: list, why: str | None = None) -> dict:
+def _design_stats(design: dict | None, i: int, borrowed: list, why: str | None = None,
+                  coord: Solution | None = None) -> dict:
     """`dofs[i].stats["shared_design"]`: the orders this DOF borrowed per well, the lending cells,
-    the cells' estimated design spread tau, or why this DOF took no part."""
+    the cells' estimated design spread tau, or why this DOF took no part; for a DOF that borrowed,
+    its global restoring degree and why it has that degree (`_degree`)."""
     if design is None:
         return {"used": False, "why": "off or a single DOF"}
     out = {"tau": design["tau"], "cells": design["members"], "borrowed": borrowed,
            "used": any(borrowed)}
+    if any(borrowed) and coord is not None:
+        out["degree"] = int(coord.stats["K_r"])
+        out["degree_notes"] = list(coord.stats.get("degree_notes", []))
     if i in design["excluded"] or why:
         out["why"] = why or design["excluded"][i]
     return out
@@ -765,7 +772,7 @@ def reconstruct(
             recordings_per_well=[[recs[k].name for k in g] for g in groups],
             stats={k: np.asarray(v).tolist() for k, v in coord.stats.items()}
             | {"dropped_velocity_damping": dropped, "restoring_orders_added": added, "coordination": route,
-               "paper_route_rejected": why, "shared_design": _design_stats(design, i, borrowed, design_why),
+               "paper_route_rejected": why, "shared_design": _design_stats(design, i, borrowed, design_why, coord),
                "escapes": _sanity.escapes(np.asarray(g.stiffness), eq)},
         ))
     say("training scores, sanity checks, resolution report")
