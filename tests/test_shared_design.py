@@ -211,3 +211,8 @@ def test_command_line_records_and_shows_what_was_lent_and_can_switch_it_off(tmp_
     out = capsys.readouterr().out
     assert "Cells of one design" in out and "DOF 1: borrowed well 0: q^" in out
     assert f"; global degree {degree}" in out
+    # the coordination route of each DOF and the auto route's notes are in the file and printed
+    routes = on["coordination"]
+    assert [r["route"] for r in routes] == [api.stats["dofs"][i].stats["coordination"] for i in range(2)]
+    assert all(isinstance(r["notes"], list) for r in routes)
+    assert "Coordination (the route per DOF and why):" in out and f"DOF 1: {routes[1]['route']}" in out

@@ -16,7 +16,7 @@ from .._errors import GMRInputError
 from .._reconstruct._sanity import GMRDataWarning
 from ._args import add_columns_option, load_recordings, positive_int
 from ._progress import stage
-from ._show import _term_table, format_shared_design
+from ._show import _term_table, format_coordination, format_shared_design
 
 
 def register(sub):
@@ -70,6 +70,19 @@ def shared_design_of(stats: dict) -> list[dict]:
     return [json.loads(json.dumps(r, default=float)) if isinstance(r, dict) else {} for r in rows]
 
 
+def coordination_of(stats: dict) -> list[dict]:
+    """Per DOF, the coordination route `reconstruct` took (auto: "gls", "joint", "gls + joint
+    damping") and its notes (why the paper's route was replaced or kept, or its degree changed),
+    JSON-ready; [] where the fit has none (GMC-SINDy)."""
+    rows = []
+    for rep in stats.get("dofs", []):
+        route = rep.stats.get("coordination") if isinstance(rep.stats, dict) else None
+        if route is None:
+            return []
+        rows.append({"route": str(route), "notes": [str(n) for n in rep.stats.get("paper_route_rejected", [])]})
+    return rows
+
+
 def figure_path(out: str, figure: str | None) -> Path:
     """Where `gmr fit` writes its figure: `--figure`, else OUT with its suffix replaced by _fit.png."""
     if figure is not None:
@@ -121,6 +134,9 @@ def run(args) -> int:
     design = shared_design_of(st)
     if design:
         extra["shared_design"] = design
+    routes = coordination_of(st)
+    if routes:
+        extra["coordination"] = routes
     gmr.save_model(model, args.out, method=st["method"],
                    library={"r": lib.restoring_order, "d": lib.damping_order}, training=st["training"],
                    warnings=load_warnings + list(st["warnings"]), data_range=data_range(recs), **extra)
@@ -131,6 +147,8 @@ def run(args) -> int:
         if rep.equilibria.size:
             print(f"  DOF {i}: equilibria {np.round(rep.equilibria, 6).tolist()}, global orders "
                   f"K_r={rep.stats['K_r']}, K_d={rep.stats['K_d']}")
+    for line in format_coordination(routes):
+        print(line)
     for line in format_shared_design(design):
         print(line)
     for name, sc in st["training"].items():

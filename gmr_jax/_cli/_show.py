@@ -17,7 +17,19 @@ from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, term_
 
 #: keys `show` prints in their own sections; any other key is listed at the end.
 _KNOWN = ("format", "topology", "masses", "terms", "method", "library", "training", "warnings", "data_range",
-          "resolution", "shared_design")
+          "resolution", "shared_design", "coordination")
+
+
+def format_coordination(routes: list[dict]) -> list[str]:
+    """`gmr fit`/`gmr show`: per DOF, the coordination route and why (where the auto route said why)."""
+    out = []
+    for i, r in enumerate(routes):
+        if not isinstance(r, dict):
+            continue
+        notes = [str(n) for n in r.get("notes") or []]
+        out.append(f"    DOF {i}: {r.get('route', '?')}" + (":" if notes else ""))
+        out += [f"      - {n}" for n in notes]
+    return (["  coordination route per DOF:"] + out) if out else []
 
 
 def format_shared_design(design: list[dict]) -> list[str]:
@@ -33,8 +45,7 @@ def format_shared_design(design: list[dict]) -> list[str]:
         if r.get("used"):
             per_well = "; ".join(f"well {k}: q^{', q^'.join(map(str, b))}" for k, b in enumerate(borrowed) if b)
             degree = f"; global degree {r['degree']}" if "degree" in r else ""
-            out.append(f"    DOF {i}: borrowed {per_well}{degree}")
-            out += [f"      {note}" for note in r.get("degree_notes") or []]
+            out.append(f"    DOF {i}: borrowed {per_well}{degree}")  # why that degree: the coordination notes
         elif r.get("why"):
             out.append(f"    DOF {i}: on its own ({r['why']})")
     return out
@@ -195,6 +206,10 @@ def _describe(model, d: dict, name: str, p: int) -> str:
 
         out += ["", "What each well's data resolved (F, F', F'' needed at every well; NO = needed, unresolved):"]
         out += format_resolution(res)
+    routes = d.get("coordination")
+    if isinstance(routes, list) and routes:
+        out += ["", "Coordination (the route per DOF and why):"]
+        out += format_coordination(routes)[1:]
     design = d.get("shared_design")
     if isinstance(design, list) and design:
         out += ["", "Cells of one design (restoring orders lent as a prior to the weakly excited cells):"]
