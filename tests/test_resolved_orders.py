@@ -191,18 +191,27 @@ def test_least_risk_degree_lowers_only_where_the_high_orders_are_uncertain():
     assert best is top and notes == []
 
 
+def _kresling_1mm(seed, *settings, twist="linear"):
+    """The 5-cell Kresling chain at 1 mm, 60 dB, `seed`: the system and, per keyword set in
+    `settings`, the reconstruction (Library(5, 5)) and its per-cell restoring errors."""
+    system = g.systems.kresling5(twist=twist, damping_ratio=g.systems.KRESLING5_DEPLOYMENT_DAMPING)
+    recs = g.systems.make_recordings(system, 1e-3, snr_db=60, seed=seed)
+    out = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for kw in settings:
+            res = g.reconstruct(recs, g.Library(5, 5), **kw)
+            out.append((res, [g.metrics.restoring_error(res.value, system.truth, c, system.x_range[c])
+                              for c in range(5)]))
+    return system, out
+
+
 @pytest.mark.slow  # torque-free 5-cell training data and two reconstructions (~2 min)
 def test_torque_free_kresling_every_cell_within_three_percent():
     # issue 15: with q^4 of the deployed wells kept where resolved, cells 1-3 reach the exact-
     # Taylor oracle (cell 3 was 4.25 %); cells 4-5 do not resolve F''' at these amplitudes and
     # borrow it from the others (cells of one design, `_shape_prior`): tip cell 33 % -> < 3 %
-    system = g.systems.kresling5(twist="torque_free", damping_ratio=g.systems.KRESLING5_DEPLOYMENT_DAMPING)
-    recs = g.systems.make_recordings(system, 1e-3, snr_db=60, seed=3)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        res = g.reconstruct(recs, g.Library(5, 5))
-        alone = g.reconstruct(recs, g.Library(5, 5), shared_design=False)
-    errs = [g.metrics.restoring_error(res.value, system.truth, c, system.x_range[c]) for c in range(5)]
+    _, ((res, errs), (_, alone_errs)) = _kresling_1mm(3, {}, {"shared_design": False}, twist="torque_free")
     assert max(errs) < 0.03, errs
     assert 4 in res.stats["dofs"][2].stats["restoring_orders_added"][1]
     assert all(3 in b for b in res.stats["dofs"][4].stats["shared_design"]["borrowed"])
@@ -212,7 +221,7 @@ def test_torque_free_kresling_every_cell_within_three_percent():
     assert cell4["shared_design"]["used"] and int(cell4["K_r"]) == 7 and errs[3] < 0.015, (cell4["K_r"], errs)
     assert any("turns outward" in w and "degree 7" in w for w in cell4["paper_route_rejected"])
     assert not any(w.startswith("DOF 3: the restoring force turns outward") for w in res.stats["warnings"])
-    tip = g.metrics.restoring_error(alone.value, system.truth, 4, system.x_range[4])
+    tip = alone_errs[4]
     assert tip > 0.25, tip  # per cell, the tip's quintic from F, F', F'' (the oracle's 33 %)
 
 
@@ -222,17 +231,11 @@ def test_nominal_kresling_one_well_term_gives_an_odd_quintic_not_the_exact_sexti
     # sextic was 6.55 % off (and cannot confine), the GLS quintic is at the F, F', F'' oracle's 1.3 %
     # (its leading term is negative: it turns outward, but beyond the cell's energy bound);
     # with the cells' shared design every cell is within the 0.5 % target
-    system = g.systems.kresling5(damping_ratio=g.systems.KRESLING5_DEPLOYMENT_DAMPING)
-    recs = g.systems.make_recordings(system, 1e-3, snr_db=60, seed=3)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        alone = g.reconstruct(recs, g.Library(5, 5), shared_design=False)
-        res = g.reconstruct(recs, g.Library(5, 5))
+    _, ((alone, alone_errs), (_, errs)) = _kresling_1mm(3, {"shared_design": False}, {})
     cell = alone.stats["dofs"][3]
     assert int(cell.stats["K_r"]) == 5 and cell.stats["coordination"] == "gls"
-    err = g.metrics.restoring_error(alone.value, system.truth, 3, system.x_range[3])
+    err = alone_errs[3]
     assert err < 0.015, err
-    errs = [g.metrics.restoring_error(res.value, system.truth, c, system.x_range[c]) for c in range(5)]
     assert max(errs) < 0.005, errs
 
 
@@ -241,12 +244,7 @@ def test_torque_free_kresling_borrowed_nonic_gives_way_to_the_septic_of_lower_ri
     # issue 15: 1 mm seed 1, cells 4-5 borrowed q^2..q^4; the exact nonics through the borrowed q^4
     # (3-4 % off the truth: the donor's truncation bias) were 3.83 / 2.70 % off; the septics, of lower
     # estimated risk over the span, 1.34 / 1.37 % (`least_risk_degree`)
-    system = g.systems.kresling5(twist="torque_free", damping_ratio=g.systems.KRESLING5_DEPLOYMENT_DAMPING)
-    recs = g.systems.make_recordings(system, 1e-3, snr_db=60, seed=1)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        res = g.reconstruct(recs, g.Library(5, 5))
-    errs = [g.metrics.restoring_error(res.value, system.truth, c, system.x_range[c]) for c in range(5)]
+    _, ((res, errs),) = _kresling_1mm(1, {}, twist="torque_free")
     assert max(errs) < 0.03, errs
     for c in (3, 4):
         st = res.stats["dofs"][c].stats

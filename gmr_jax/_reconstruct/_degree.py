@@ -23,6 +23,24 @@ def redundancy(coord: Solution) -> int:
     return int(np.asarray(coord.stats.get("dof_r", 0)))
 
 
+def odd_gls(fits: LocalFit, library: Library, max_degree: int | None = None) -> Solution | None:
+    """The GLS coordination restricted to odd restoring degrees (`coordinate` with `confining=True`,
+    at most `max_degree`), or None where it failed or is not finite."""
+    bound = None if max_degree is None else jnp.asarray(max_degree)
+    alt = jax.device_get(coordinate(fits, library, method="gls", confining=True, max_degree=bound, throw=False))
+    if alt.result != RESULTS.successful or not np.all(np.isfinite(np.asarray(alt.value.flat()))):
+        return None
+    return alt
+
+
+def admissible(stiffness, equilibria, energy: float) -> bool:
+    """No spurious sign change over the span (`restoring_faults`) and no escape within the energy
+    bound (`_sanity.reachable_escapes`): what a replacement degree must satisfy."""
+    stiffness, equilibria = np.asarray(stiffness, float), np.asarray(equilibria)
+    return not (any("changes sign" in f for f in restoring_faults(stiffness, equilibria))
+                or _sanity.reachable_escapes(stiffness, equilibria, energy))
+
+
 #: `odd_degree`: the odd-degree GLS replaces an even paper route unless its local conditions reject it
 #: at this level (bistable joint, 1 degree, 40 dB, seed 1: a spurious q^5 at one well, p = 1e-4, the joint
 #: regression 0.0004 %, the quintic 3 %; Kresling 1 mm seed 3 cell 4: p = 0.0096, the quintic 1.29 %,
@@ -41,14 +59,8 @@ def odd_degree(paper: Solution, fits: LocalFit, library: Library, energy: float)
     coef = np.trim_zeros(np.asarray(paper.value.stiffness, float), "b")
     if coef.size % 2 == 0 or coef.size < 2:
         return None
-    alt = jax.device_get(coordinate(fits, library, method="gls", confining=True, throw=False))
-    eq = np.asarray(fits.equilibrium)
-    if alt.result != RESULTS.successful or not np.all(np.isfinite(np.asarray(alt.value.flat()))):
-        return None
-    stiff = np.asarray(alt.value.stiffness)
-    if any("changes sign" in f for f in restoring_faults(stiff, eq)):
-        return None
-    if _sanity.reachable_escapes(stiff, eq, energy):
+    alt = odd_gls(fits, library)
+    if alt is None or not admissible(alt.value.stiffness, fits.equilibrium, energy):
         return None
     if float(alt.stats["dof_r"]) > 0 and not float(alt.stats["p_r"]) >= ODD_DEGREE_MIN_P:
         return None
@@ -70,9 +82,8 @@ def confine_borrowed(coord: Solution, fits: LocalFit, library: Library, energy: 
     while reach and int(coord.stats["K_r"]) > 2 * eq.size - 1:
         deg = int(coord.stats["K_r"])
         cap = deg - 1 if deg % 2 == 0 else deg - 2
-        alt = jax.device_get(coordinate(fits, library, method="gls", confining=True, max_degree=jnp.asarray(cap),
-                                        throw=False))
-        if alt.result != RESULTS.successful or not np.all(np.isfinite(np.asarray(alt.value.flat()))):
+        alt = odd_gls(fits, library, cap)
+        if alt is None:
             break
         notes.append(f"the borrowed law of degree {deg} turns outward at x = {reach[0]['x']:.4g} with a barrier "
                      f"({reach[0]['barrier']:.3g}) within the energy bound ({energy:.3g}): degree "
@@ -106,7 +117,7 @@ def least_risk_degree(coord: Solution, fits: LocalFit, library: Library, energy:
     E[(F_k - F_K)^2] = bias_k^2 + var F_K - var F_k, and bias_k^2 + var F_k (its risk) is
     estimated without bias by (F_k - F_K)^2 - var F_K + 2 var F_k (Mallows' C_p on the law's
     values); F_K's risk is var F_K. Candidates must be admissible as `confine_borrowed` demands
-    (no spurious sign change, no escape within the energy bound). Returns `(coord, notes)`;
+    (`admissible`). Returns `(coord, notes)`;
     a lower law carries its bound in `stats["max_degree_r"]`."""
     eq = np.asarray(fits.equilibrium, float)
     span = float(eq.max() - eq.min())
@@ -115,12 +126,8 @@ def least_risk_degree(coord: Solution, fits: LocalFit, library: Library, energy:
     best, best_risk, notes = coord, float(np.mean(v_top)), []
     top = int(coord.stats["K_r"])
     for k in range(top - 2, 2 * eq.size - 2, -2):
-        alt = jax.device_get(coordinate(fits, library, method="gls", confining=True, max_degree=jnp.asarray(k),
-                                        throw=False))
-        if alt.result != RESULTS.successful or not np.all(np.isfinite(np.asarray(alt.value.flat()))):
-            continue
-        stiff = np.asarray(alt.value.stiffness, float)
-        if any("changes sign" in f for f in restoring_faults(stiff, eq)) or _sanity.reachable_escapes(stiff, eq, energy):
+        alt = odd_gls(fits, library, k)
+        if alt is None or not admissible(alt.value.stiffness, eq, energy):
             continue
         f_k, v_k = span_curve(alt, x)
         risk = float(np.mean((f_k - f_top) ** 2 + 2.0 * v_k - v_top))
