@@ -11,7 +11,8 @@ import pytest
 import gmr_jax as g
 from gmr_jax._fit._library import STIFFNESS
 from gmr_jax._reconstruct._degree import least_risk_degree, span_curve
-from gmr_jax._reconstruct._reconstruct import _extend_restoring, _fit_wells, _Failure, low_order_terms
+from gmr_jax._reconstruct._reconstruct import _extend_restoring, _fit_wells, _Failure, _screen, low_order_terms
+from gmr_jax._reconstruct._shape_prior import refit_with_prior
 
 
 def _wells(a4, n=4000, amp=0.08, noise=1e-4, seed=0):
@@ -60,6 +61,63 @@ def test_nothing_is_added_where_the_next_term_is_not_resolved():
     new, added = _extend_restoring(fits, xs, vs, ys, w, lib, solver, 3.0, 0, _Failure("test", True))
     assert added == [[], []]
     np.testing.assert_array_equal(np.asarray(new.coef), np.asarray(fits.coef))
+
+
+def _mean_centred_wells(n=4000, amp=0.08, noise=2e-3, seed=2):
+    """Two wells as a recording gives them: q = x - mean(x), so the local law carries the force at
+    the mean, a_0 = -a_2 mean(q^2) (the force has zero mean), which no fit without q^2 resolves."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / 400.0
+    xs, vs, ys = [], [], []
+    for x0, sign in ((-1.0, 1.0), (1.0, -1.0)):
+        q = sum(amp / 3 * np.sin(2 * np.pi * f * t + rng.uniform(0, 6.3)) for f in (1.1, 2.9, 6.7))
+        q = q - q.mean()
+        v = np.gradient(q, t)
+        y = 2.0 * q + sign * 1.5 * (q**2 - np.mean(q**2)) + 0.2 * v
+        xs.append(x0 + q), vs.append(v), ys.append(y + noise * rng.standard_normal(n))
+    return (jnp.asarray(np.array(a)) for a in (xs, vs, ys, np.ones((2, n))))
+
+
+def test_a_curvature_added_to_a_local_fit_brings_back_the_force_at_the_mean():
+    """The screen drops q^0 from a fit that stops at q^1 (the force at the mean is 0 to first
+    order); q^2 refitted without it is biased by a third to two thirds of itself, with it not."""
+    lib = g.Library(3, 1)
+    xs, vs, ys, w = _mean_centred_wells()
+    solver = g.STLS(threshold=1e6, alpha=0.0, normalize_columns=True, unbias=True)
+    fits = _screen(_fit_wells(xs, vs, ys, w, lib, solver, None, jnp.asarray(low_order_terms(lib, 1))).value, 3.0)
+    i0, i2 = lib.terms().index((STIFFNESS, 0)), lib.terms().index((STIFFNESS, 2))
+    assert np.all(np.asarray(fits.coef)[:, i0] == 0)  # screened: the sample mean of the force is ~0
+    new, added = _extend_restoring(fits, xs, vs, ys, w, lib, solver, 3.0, 0, _Failure("test", True))
+    assert added == [[2], [2]]
+    coef, cov = np.asarray(new.coef), np.asarray(new.covariance)
+    a2 = np.array([1.5, -1.5])
+    se2 = np.sqrt(cov[:, i2, i2])
+    assert np.all(np.abs(coef[:, i2] - a2) < 4 * se2), (coef[:, i2], se2)
+    # independent: least squares on the same columns without the constant is far off
+    for k in range(2):
+        q = np.asarray(xs[k]) - np.mean(np.asarray(xs[k]))
+        cols = np.column_stack([q, q**2, np.asarray(vs[k]), q * np.asarray(vs[k])])
+        b = np.linalg.lstsq(cols, np.asarray(ys[k]), rcond=None)[0][1]
+        assert abs(b - a2[k]) > 10 * se2[k] and abs(b - a2[k]) > 0.2 * abs(a2[k]), (b, se2[k])
+
+
+def test_a_borrowed_curvature_is_refitted_with_the_force_at_the_mean():
+    lib = g.Library(3, 1)  # 1, x, x^2, x^3, sgn v, v, x v
+    xs, vs, ys, _ = _mean_centred_wells(seed=3)
+    q, v, y = (np.asarray(a[0]) for a in (xs, vs, ys))
+    q = q - q.mean()
+    theta = np.asarray(lib(q, v))
+    own = np.array([False, True, False, False, False, True, False])  # q^0 screened, stops at q^1
+    c_own = np.zeros(lib.n_terms)
+    c_own[own] = np.linalg.lstsq(theta[:, own], y, rcond=None)[0]
+    rss = float(np.sum((y - theta @ c_own) ** 2))
+    span = 2.0
+    rho = 1.5 * span / 2.0  # the truth's a_2 L / a_1
+    coef, _ = refit_with_prior(q, v, y, np.ones_like(q), lib, c_own, rss, q.size, span, {2: (rho, 1e8)})
+    # a vague prior: the least-squares fit on 1, q, q^2, v (the constant brought back)
+    cols = np.array([0, 1, 2, 5])
+    np.testing.assert_allclose(coef[cols], np.linalg.lstsq(theta[:, cols], y, rcond=None)[0], rtol=1e-6)
+    assert coef[2] == pytest.approx(1.5, rel=0.05)
 
 
 def _taylor(coef, x0, order):

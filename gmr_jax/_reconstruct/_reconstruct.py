@@ -247,6 +247,17 @@ def low_order_terms(library: Library, restoring_order: int = 1) -> np.ndarray:
     return np.array([t in keep for t in library.terms()])
 
 
+def with_constant(support: np.ndarray, library: Library) -> np.ndarray:
+    """`support` (terms,) with the restoring constant q^0 restored. The local coordinate is
+    q = x - mean(x), not x - x_eq, so the force at the mean is not 0 but about -a_2 var(q)
+    (the mean force vanishes): where the screen dropped that small constant, a refit without
+    it biases a_2 by a third to two thirds of itself (Kresling truss cells, v from x: a_2 16-26 %
+    low, 3.9-14.5 % restoring error; with the constant 0-5 %)."""
+    out = np.array(support, bool)
+    out[library.indices(STIFFNESS)[0]] = True
+    return out
+
+
 def _fit_wells(xs, vs, ys, w, library, solver, select, keep=None):
     # One jitted fit per well (same shapes: compiled once), stacked. A vmap over wells with
     # batched weights and the CV threshold sweep stalled in XLA:CPU (jax 0.10), so loop here.
@@ -278,7 +289,7 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
         for k in np.nonzero(np.any((coef != 0) & drop[None, :], axis=1))[0]:
             slv = eqx.tree_at(lambda s: s.threshold, solver, fits.threshold[k])
             sol = fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=keep,
-                            support=jnp.asarray((coef[k] != 0) & ~drop), throw=False)
+                            support=jnp.asarray(with_constant(coef[k] != 0, library) & ~drop), throw=False)
             if sol.result != RESULTS.successful:
                 failure.note(sol.result, f"DOF {dof}, well {k}: refit without unshared damping terms")
             new = jax.tree.map(lambda a: np.asarray(a)[None], sol.value)
@@ -308,7 +319,7 @@ def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failur
             top = max([j for j, c in enumerate(coef[idx]) if c != 0], default=0)
             if top >= library.restoring_order:
                 break
-            mask = coef != 0
+            mask = with_constant(coef != 0, library)
             mask[idx[top + 1]] = True
             slv = eqx.tree_at(lambda s: s.threshold, solver, fits.threshold[k])
             sol = jax.device_get(fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=mask,
@@ -614,9 +625,12 @@ def reconstruct(
       interpolant from F, F', F'' at both wells is 1.3 % off (critical force 0.7 %), from
       F to its third derivative 0.09 %; a dropped x^3 also biases the slope (RESULTS.md).
     - `keep_restoring_order`: see `keep_low_orders`. Default (None): 3 when every recording
-      carries measured velocities and accelerations, 1 when they had to be estimated from x:
-      the differentiation filter's gain error then correlates with the amplitude and a kept
-      x^3 absorbs it (bistable joint at 1 degree from x alone: x^3 17 times too large).
+      carries measured accelerations, 1 when they had to be estimated (from x or v): the
+      differentiation filter's gain error on the inertia then correlates with the amplitude and
+      a kept x^3 absorbs it (bistable joint at 1 degree from x alone: x^3 17 times too large).
+      A velocity estimated from x enters only the damping, which is small (3-cell Kresling
+      chain without its velocity channels, 30 dB: restoring error 3.9-14.5 % with the order
+      kept at 1, 2.9-3.4 % at 3, as with measured velocities 2.3-3.1 %).
     - `coordination`: "gls" (covariance-weighted, lowest adequate degree) or "hermite" (the
       paper's exact interpolant); see `coordinate`.
     - `shared_damping`: the position-independent damping sgn(v)|v|^j (j != 1; j = 1 belongs
@@ -631,9 +645,9 @@ def reconstruct(
       support plus that term; reported as `restoring_orders_added` in `dofs[i].stats`): a
       resolved term left out biases the kept ones, and the coordination takes them as exact
       (torque-free Kresling, deployed well: a dropped q^4 at t = 59 biased q^3 by 2 %). Default
-      (None): on when every recording carries measured velocities and accelerations (as
-      `keep_restoring_order`: with v, a estimated from x, a higher order absorbs the
-      differentiation filter's gain error).
+      (None): on when every recording carries measured accelerations (as
+      `keep_restoring_order`: with a estimated, a higher order absorbs the differentiation
+      filter's gain error).
 
     - `shared_design`: with several DOFs, cells of one design (the same wells at the same
       relative positions, Taylor ratios that agree across cells: `_shape_prior`) lend the
@@ -668,7 +682,7 @@ def reconstruct(
     """
     failure = _Failure("reconstruct", throw)
     say = progress or (lambda msg: None)
-    measured = all(r.v is not None and r.a is not None and not r.derived for r in recordings)
+    measured = all(r.a is not None and "a" not in r.derived for r in recordings)
     if keep_restoring_order is None:
         keep_restoring_order = 3 if measured else 1
     if extend_restoring is None:

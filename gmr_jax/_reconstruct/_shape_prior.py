@@ -241,6 +241,7 @@ def refit_with_prior(q, v, y, w, library: Library, coef, rss, n_samples, span, b
     support = np.asarray(coef) != 0
     for m in borrow:
         support[idx[m]] = True
+    support[idx[0]] = True  # the force at the mean, which the curvature shifts (`_reconstruct.with_constant`)
     cols = np.nonzero(support)[0]
     theta = np.asarray(library(q, v), float)[:, cols]
     keep = np.asarray(w) > 0
