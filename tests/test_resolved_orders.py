@@ -249,6 +249,29 @@ def test_least_risk_degree_lowers_only_where_the_high_orders_are_uncertain():
     assert best is top and notes == []
 
 
+@pytest.mark.slow
+def test_an_even_law_gives_way_to_the_joint_one_even_where_no_motion_reaches_its_escape():
+    """Magnetic bistable, 30 dB, most excited well at 0.45 % of the interwell distance, seed 1:
+    F'' resolved at one well only gives an exact quartic (F -> +inf on both sides) whose escape
+    lies beyond the energy bound; kept, it was 72 % off over the box (the value-and-slope law 45 %).
+    An even degree cannot confine, so it is never kept for want of a reachable escape."""
+    s = g.systems.magnetic_bistable()
+    recs = g.systems.make_recordings(s, 4.377e-4, snr_db=30.0, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = g.reconstruct(recs)
+    st = res.stats["dofs"][0].stats
+    assert any("even degree 4" in w for w in st["paper_route_rejected"]), st["paper_route_rejected"]
+    assert st["coordination"] == "joint"
+    k = np.trim_zeros(np.asarray(res.value.stiffness[0]), "b")
+    assert (k.size - 1) % 2 == 1 and k[-1] > 0  # odd degree, F -> +inf as x -> +inf: confining
+    # independent: the relative L2 error over the box, by NumPy against the truth
+    xs = np.linspace(*s.x_range[0], 801)
+    truth = np.array([float(s.truth.restoring(jnp.asarray([x]))[0]) for x in xs])
+    err = np.linalg.norm(np.polynomial.polynomial.polyval(xs, k) - truth) / np.linalg.norm(truth)
+    assert err < 0.5, err
+
+
 def _kresling_1mm(seed, *settings, twist="linear"):
     """The 5-cell Kresling chain at 1 mm, 60 dB, `seed`: the system and, per keyword set in
     `settings`, the reconstruction (Library(5, 5)) and its per-cell restoring errors."""
