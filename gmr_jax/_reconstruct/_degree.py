@@ -23,6 +23,11 @@ def redundancy(coord: Solution) -> int:
     return int(np.asarray(coord.stats.get("dof_r", 0)))
 
 
+def degree(stiffness) -> int:
+    """The degree of a restoring law (ascending coefficients, trailing zeros dropped); -1 for 0."""
+    return np.trim_zeros(np.asarray(stiffness, float), "b").size - 1
+
+
 def odd_gls(fits: LocalFit, library: Library, max_degree: int | None = None) -> Solution | None:
     """The GLS coordination restricted to odd restoring degrees (`coordinate` with `confining=True`,
     at most `max_degree`), or None where it failed or is not finite."""
@@ -56,8 +61,8 @@ def odd_degree(paper: Solution, fits: LocalFit, library: Library, energy: float)
     `energy` (the criterion on which the paper route itself is kept) and its local conditions do
     not reject it (chi-squared p >= `ODD_DEGREE_MIN_P`); else None (the joint regression decides). Kresling chain, 1 mm, seed 3, cell 4 (F''' resolved at the
     deployed well only): the exact sextic 6.55 % off, the quintic 1.29 %."""
-    coef = np.trim_zeros(np.asarray(paper.value.stiffness, float), "b")
-    if coef.size % 2 == 0 or coef.size < 2:
+    k = degree(paper.value.stiffness)
+    if k % 2 == 1 or k < 1:
         return None
     alt = odd_gls(fits, library)
     if alt is None or not admissible(alt.value.stiffness, fits.equilibrium, energy):

@@ -15,7 +15,7 @@ from .._coordination._joint import CONFLICT as JOINT_CONFLICT
 from .._coordination._joint import JointSettings, damping_faults, joint_coordinate, restoring_faults
 from .._errors import GMRInputError
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, Library
-from .._fit._local_fit import AutoThreshold, LocalFit, fit_local
+from .._fit._local_fit import AutoThreshold, LocalFit, fit_local, with_constant
 from .._fit._stls import STLS, compress, stls_qr
 from .._fit._threshold import default_thresholds, select_threshold
 from .._model._model import GlobalModel
@@ -24,7 +24,7 @@ from .._recordings._recording import Recording, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
 from . import _resolution, _sanity, _shape_prior
-from ._degree import confine_borrowed, least_risk_degree, odd_degree, redundancy
+from ._degree import confine_borrowed, degree, least_risk_degree, odd_degree, redundancy
 from ._sanity import GMRDataWarning
 
 #: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
@@ -245,17 +245,6 @@ def low_order_terms(library: Library, restoring_order: int = 1) -> np.ndarray:
     keep = {(STIFFNESS, k) for k in range(restoring_order + 1)}
     keep |= {(VELOCITY_DAMPING, 1), (POSITION_DAMPING, 1)}
     return np.array([t in keep for t in library.terms()])
-
-
-def with_constant(support: np.ndarray, library: Library) -> np.ndarray:
-    """`support` (terms,) with the restoring constant q^0 restored. The local coordinate is
-    q = x - mean(x), not x - x_eq, so the force at the mean is not 0 but about -a_2 var(q)
-    (the mean force vanishes): where the screen dropped that small constant, a refit without
-    it biases a_2 by a third to two thirds of itself (Kresling truss cells, v from x: a_2 16-26 %
-    low, 3.9-14.5 % restoring error; with the constant 0-5 %)."""
-    out = np.array(support, bool)
-    out[library.indices(STIFFNESS)[0]] = True
-    return out
 
 
 def _fit_wells(xs, vs, ys, w, library, solver, select, keep=None):
@@ -527,7 +516,7 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                 # ... but an even degree cannot confine on both sides whatever the bound says (magnetic
                 # bistable, 30 dB, F'' resolved at one well only: an exact quartic kept for want of a
                 # reachable escape was 72 % off, the joint law 45 %)
-                even = int(np.asarray(paper.stats.get("K_r", 1))) % 2 == 0
+                even = degree(paper.value.stiffness) % 2 == 0
                 if unconfirmed and not reach and not even:
                     why = why + ["kept: no motion within the model's energy bound "
                                  f"({energy:.3g}) reaches an escape"]

@@ -40,6 +40,7 @@ import jax.scipy.special as jsp
 import numpy as np
 
 from .._fit._library import STIFFNESS, Library
+from .._fit._local_fit import with_constant
 
 #: Wells at the same relative position: |u_jk - u_0k| below this (u = (x - x_0) / L).
 POSITION_TOL = 0.05
@@ -238,10 +239,9 @@ def refit_with_prior(q, v, y, w, library: Library, coef, rss, n_samples, span, b
     (a_m - rho a_1 / L^(m-1)) / (sd |a_1| / L^(m-1)). Returns (coef, covariance): the posterior
     mean and covariance (NumPy)."""
     idx = library.indices(STIFFNESS)  # q^0 .. q^r, in order
-    support = np.asarray(coef) != 0
+    support = with_constant(np.asarray(coef) != 0, library)  # the force at the mean moves with the curvature
     for m in borrow:
         support[idx[m]] = True
-    support[idx[0]] = True  # the force at the mean, which the curvature shifts (`_reconstruct.with_constant`)
     cols = np.nonzero(support)[0]
     theta = np.asarray(library(q, v), float)[:, cols]
     keep = np.asarray(w) > 0
