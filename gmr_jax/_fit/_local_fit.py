@@ -10,6 +10,7 @@ from .._solution import RESULTS, Solution, error_if_failed
 from .._trace_cache import disk_traced
 from ._library import STIFFNESS, Library
 from ._stls import STLS, compress, coefficient_covariance, stls_qr
+from ._target_noise import TargetNoise, structured_covariance
 from ._threshold import default_thresholds, select_threshold
 
 
@@ -47,6 +48,7 @@ def fit_local(
     weights: Float[Array, " samples"] | None = None,
     keep: Bool[Array, " terms"] | None = None,
     support: Bool[Array, " terms"] | None = None,
+    noise: TargetNoise | None = None,
     throw: bool = True,
 ) -> Solution:
     """Fit the local model of one equilibrium (Algorithm 1, steps 1.1-1.4).
@@ -58,7 +60,9 @@ def fit_local(
     thresholded away: after STLS the model is refitted (least squares, no ridge) on the STLS
     support plus `keep`. `support` restricts the fit to the flagged terms (default: the whole
     library); it bounds `keep` too (with `select`, the threshold is still chosen on the whole
-    library).
+    library). `noise`: the target's noise where it holds a differentiated signal; the
+    covariance is then the sandwich with that noise's structure (`structured_covariance`; its
+    residual-to-noise ratio in `stats["noise_ratio"]`), not sigma² (Θ'Θ)^-1.
 
     **Returns:** a `Solution` whose value is a `LocalFit`.
     """
@@ -79,6 +83,9 @@ def fit_local(
         mask = sol.stats["support"] | keep
         sol = stls_qr(qr, refit, initial_mask=mask if support is None else mask & support)
     cov = coefficient_covariance(qr, sol.value, sol.stats["support"])
+    extra = {}
+    if noise is not None:
+        cov, extra["noise_ratio"] = structured_covariance(theta, y, w, sol.value, sol.stats["support"], noise)
     fit = LocalFit(
         equilibrium=xe,
         coef=sol.value,
@@ -87,7 +94,7 @@ def fit_local(
         rss=sol.stats["rss"],
         n_samples=sol.stats["n_samples"],
     )
-    out = Solution(value=fit, result=sol.result, stats={**sol.stats, **cv})
+    out = Solution(value=fit, result=sol.result, stats={**sol.stats, **cv, **extra})
     return error_if_failed(out, throw)
 
 

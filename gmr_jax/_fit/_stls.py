@@ -157,8 +157,8 @@ def stls_qr(
 def coefficient_covariance(qr: QRData, coef, support) -> Float[Array, "terms terms"]:
     """OLS covariance sigma² (Θ_S^T Θ_S)^-1 on the support (zeros elsewhere).
 
-    sigma² = RSS / (n - |S|). This assumes white residuals; with filtered derivatives the
-    residuals are correlated and the intervals are optimistic (documented limitation)."""
+    sigma² = RSS / (n - |S|). This assumes white residuals; where the target holds a filtered
+    derivative, `fit_local(..., noise=)` uses the noise's structure instead (`_target_noise`)."""
     norms = jnp.where(column_norms(qr) > 0, column_norms(qr), 1.0)
     rn = jnp.where(support[None, :], qr.r / norms[None, :], 0.0)
     resid = qr.r @ coef - qr.z

@@ -47,6 +47,7 @@ from math import comb
 
 import numpy as np
 
+from .._fit._target_noise import structured_covariance
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING
 
 #: |coefficient| / standard error at which a kept local term counts as significant (the default screen).
@@ -261,8 +262,10 @@ def _band(q: np.ndarray, dt: float) -> tuple[float, float]:
     return float(f[1:][np.searchsorted(c, 0.05)]), float(f[1:][min(np.searchsorted(c, 0.95), c.size - 1)])
 
 
-def _hierarchical(q, v, y, damping_cols, k):
-    """OLS of y on 1, q, ..., q^k and the given damping columns: (coef_k, se_k, g_k)."""
+def _hierarchical(q, v, y, damping_cols, k, noise=None):
+    """OLS of y on 1, q, ..., q^k and the given damping columns: (coef_k, se_k, g_k); with
+    `noise` (a `TargetNoise`: the target holds estimated accelerations) the standard error is
+    the structured sandwich's (`_fit/_target_noise.py`)."""
     cols = [q**j for j in range(k + 1)] + damping_cols
     theta = np.stack(cols, axis=1)
     scale = np.linalg.norm(theta, axis=0)
@@ -274,6 +277,9 @@ def _hierarchical(q, v, y, damping_cols, k):
     s2 = float(resid @ resid) / dof
     inv = np.linalg.pinv(ts.T @ ts)
     se = np.sqrt(max(s2 * inv[k, k], 0.0)) / scale[k]
+    if noise is not None:
+        cov, _ = structured_covariance(ts, y, np.ones_like(y), coef, np.ones(ts.shape[1], bool), noise)
+        se = np.sqrt(max(float(cov[k, k]), 0.0)) / scale[k]
     col = theta[:, k]
     ss = float(np.sum((col - col.mean()) ** 2))
     vif = inv[k, k] * ss / scale[k] ** 2 if k > 0 and ss > 0 else 1.0
@@ -324,11 +330,13 @@ def _taylor(stiffness: np.ndarray, x0: float, k: int) -> float:
     return float(p.deriv(k)(x0) / np.prod(np.arange(1, k + 1))) if k <= p.degree() else 0.0
 
 
-def resolution_report(recs, targets, groups, reports, model, library, masses, topology) -> ResolutionReport:
+def resolution_report(recs, targets, groups, reports, model, library, masses, topology,
+                      noises=None) -> ResolutionReport:
     """The `ResolutionReport` of a reconstruction: `recs` (completed recordings), `targets`
     (per recording, the (N, D) force each DOF carries), `groups` (per DOF, per well, the
     recording indices), `reports` (per DOF, the `DofReport`), `model` (the `GlobalModel`),
-    `library`, `masses`, `topology` (its `carried` sums the masses a chain cell carries)."""
+    `library`, `masses`, `topology` (its `carried` sums the masses a chain cell carries);
+    `noises` (per DOF, per well, a `TargetNoise` or None) where accelerations were estimated."""
     terms = library.terms()
     idx = {k: terms.index((STIFFNESS, k)) for k in ORDERS if (STIFFNESS, k) in terms}
     carried = np.asarray(topology.carried(np.asarray(masses, float)[None, :]))[0]
@@ -359,7 +367,7 @@ def resolution_report(recs, targets, groups, reports, model, library, masses, to
                 if k not in idx:
                     continue
                 c, s = float(coef[idx[k]]), float(se[idx[k]])
-                _, se_h, gk = _hierarchical(q, v, y, damp, k)
+                _, se_h, gk = _hierarchical(q, v, y, damp, k, noises[i][w] if noises else None)
                 se_h = max(se_h, s)  # a kept term: the local fit's own (larger-library) standard error
                 a_g = _taylor(stiff, x0, k)
                 significant = c != 0 and s > 0 and abs(c) >= T_RESOLVED * s

@@ -307,7 +307,8 @@ def check_determination(dof: int, stiffness, covariance, x_lo: float, x_hi: floa
     (`studies/noise_robustness.py`, 3 seeds): the actual error was within 3.5 sd on every
     run of the joint and the NES at 20-60 dB; the clean built-in cases have 2 sd <= 0.11 %;
     the NES at 30 dB / 20 dB, seed 0 (6.2 % / 21 % error) have 2 sd = 3.6 % / 13 %. The
-    local standard errors assume white residuals, so the figure is a lower bound.
+    local standard errors take measured accelerations' residuals as white, and estimated ones'
+    noise with its filter's structure (`_fit/_target_noise.py`).
 
     `stiffness`: (K,) global restoring coefficients; `covariance`: their (K, K) covariance."""
     k = np.asarray(stiffness, float)

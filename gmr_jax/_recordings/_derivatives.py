@@ -16,7 +16,15 @@ from the data when not given (`window_choice`), as the smaller of two:
   smeared by the band-edge window (677 samples there; 13 by the noise floor).
 
 Edges use the same fitted polynomial (scipy's `mode="interp"`).
+
+`exclude_center` leaves each sample out of its own estimate (the polynomial is fitted to the
+other 2M samples of the window): the estimate's noise is then independent of the sample's own
+noise. A regression of a derived acceleration on x(t) needs that: with the sample in, the
+second-derivative filter's large centre weight correlates the target's noise with the regressor's
+(shallow arch, x only, 30 dB: the local stiffness 4.7-7.1 % high; left out: within 1 %).
 """
+
+import math
 
 import numpy as np
 
@@ -101,14 +109,29 @@ def auto_window(x: np.ndarray, dt: float, polyorder: int = 5) -> int:
     return window_choice(x, dt, polyorder)["window"]
 
 
+def savgol_taps(window: int, polyorder: int, order: int, dt: float, exclude_center: bool = False) -> np.ndarray:
+    """The (window,) taps h of the Savitzky-Golay estimate of d^order x / dt^order at a window's
+    centre: estimate[t] = sum_j h[j] x[t + j - window // 2]. With `exclude_center`, the centre
+    sample is left out of the fit (its tap is 0; module docstring)."""
+    half = window // 2
+    k = np.arange(-half, half + 1, dtype=float)
+    keep = k != 0 if exclude_center else np.ones(window, bool)
+    vander = np.vander(k[keep], polyorder + 1, increasing=True)
+    taps = np.zeros(window)
+    taps[keep] = np.linalg.pinv(vander)[order] * math.factorial(order) / dt**order
+    return taps
+
+
 def differentiate(
-    x: np.ndarray, dt: float, order: int = 1, window: int | None = None, polyorder: int = 5
+    x: np.ndarray, dt: float, order: int = 1, window: int | None = None, polyorder: int = 5,
+    exclude_center: bool = False,
 ) -> np.ndarray:
     """d^order x / dt^order along axis 0 by Savitzky-Golay differentiation.
 
-    `window` (odd, samples) defaults to `auto_window` of each column. A wrong argument (NaN in x,
-    dt <= 0, a window not odd or longer than x, a constant column with the automatic window)
-    raises `GMRInputError`.
+    `window` (odd, samples) defaults to `auto_window` of each column. `exclude_center`: each
+    sample's estimate leaves that sample out (module docstring; the first and last window // 2
+    samples keep scipy's edge fit). A wrong argument (NaN in x, dt <= 0, a window not odd or
+    longer than x, a constant column with the automatic window) raises `GMRInputError`.
 
     Examples:
         >>> import numpy as np
@@ -123,7 +146,7 @@ def differentiate(
         raise GMRInputError(f"differentiate: x must be an array of real numbers, got dtype {xa.dtype}")
     x = xa.astype(float)
     if x.ndim == 1:
-        return differentiate(x[:, None], dt, order, window, polyorder)[:, 0]
+        return differentiate(x[:, None], dt, order, window, polyorder, exclude_center)[:, 0]
     if x.ndim != 2:
         raise GMRInputError(f"differentiate: x must be (N,) or (N, D), got shape {x.shape}")
     check_real(dt, "differentiate: dt", lo=0.0, lo_open=True, fix="give the sampling step in seconds")
@@ -151,4 +174,7 @@ def differentiate(
                                 f"from (nothing to fit); pass window=, or drop that column")
         w = window or auto_window(x[:, k], dt, polyorder)
         out[:, k] = _savgol(x[:, k], w, polyorder, deriv=order, delta=dt, mode="interp")
+        if exclude_center and n > w:
+            half = w // 2
+            out[half:n - half, k] = np.correlate(x[:, k], savgol_taps(w, polyorder, order, dt, True), mode="valid")
     return out

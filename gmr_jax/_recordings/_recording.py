@@ -11,7 +11,7 @@ import numpy as np
 
 from .._errors import GMRDataWarning, GMRInputError, describe, is_tracer
 from .._topology import as_topology
-from ._derivatives import differentiate
+from ._derivatives import auto_window, differentiate
 from ._integrate import integrated_signals
 
 MIN_SAMPLES = 64
@@ -47,6 +47,7 @@ class Recording:
     derived: tuple = field(default_factory=tuple)
     equilibrium: np.ndarray | None = None
     integration: dict | None = field(default=None, compare=False)
+    derivation: dict | None = field(default=None, compare=False)
 
     def __post_init__(self):
         _check_fields(self)
@@ -131,13 +132,20 @@ class Recording:
         f = self.force if self.force is not None else np.zeros((n, d))
         return b, f
 
-    def complete(self, topology: str = "chain", window: int | None = None) -> "Recording":
+    def complete(self, topology: str = "chain", window: int | None = None,
+                 exclude_center: bool = False) -> "Recording":
         """Fill missing `v` and `a` by Savitzky-Golay differentiation of x (recorded in
         `derived`; of a measured v when x was integrated from it). `a` is absolute: x'' plus base
         acceleration (chain: cumulated over cells). An acceleration-only recording's integrated
-        mass displacements become cell deformations for a chain."""
+        mass displacements become cell deformations for a chain. `exclude_center`: x'' at each
+        sample leaves that sample out (`differentiate`), so that its noise is independent of x
+        there (a regression on x(t) needs it; a first derivative's centre weight is 0 already).
+        `derivation` then says, per derived signal, what it was differentiated from, the
+        order, the window of each column and whether the centre was left out (the noise model
+        of `reconstruct`'s local fits, `_fit/_target_noise.py`)."""
         x, v, a, derived = self.x, self.v, self.a, list(self.derived)
         info = self.integration
+        how = dict(self.derivation or {})
         topo = as_topology(topology)
         if info and info["from"] == "a" and info["topology"] is None:  # not yet given a topology
             if topo.name == "chain" and x.shape[1] > 1:  # mass displacements -> cell deformations
@@ -150,14 +158,17 @@ class Recording:
             v = differentiate(x, self.dt, 1, window)
             derived.append("v")
         if a is None:
-            if self.derivative_source() == "v":
-                xdd = differentiate(v, self.dt, 1, window)
-            else:
-                xdd = differentiate(x, self.dt, 2, window)
+            src, order = ("v", 1) if self.derivative_source() == "v" else ("x", 2)
+            sig = v if src == "v" else x
+            windows = [window or (auto_window(sig[:, k], self.dt) if np.ptp(sig[:, k]) > 0 else None)
+                       for k in range(sig.shape[1])]
+            xdd = differentiate(sig, self.dt, order, window, exclude_center=exclude_center and order == 2)
             b, _ = self.inputs()
             a = topo.absolute(xdd, b)
             derived.append("a")
-        return replace(self, x=x, v=v, a=a, derived=tuple(derived), integration=info)
+            how["a"] = {"from": src, "order": order, "windows": windows, "polyorder": 5,
+                        "exclude_center": bool(exclude_center and order == 2)}
+        return replace(self, x=x, v=v, a=a, derived=tuple(derived), integration=info, derivation=how or None)
 
     def save(self, path) -> None:
         save_recording(self, path)
