@@ -165,10 +165,14 @@ def coefficient_covariance(qr: QRData, coef, support) -> Float[Array, "terms ter
     rss = jnp.maximum(qr.yy - jnp.sum(qr.z**2), 0.0) + jnp.sum(resid**2)
     k = jnp.sum(support)
     sigma2 = rss / jnp.maximum(qr.n - k, 1.0)
-    g = rn.T @ rn + jnp.diag(jnp.where(support, 0.0, 1.0))
-    ginv = inverse(g)
-    ginv = jnp.where(support[:, None] & support[None, :], ginv, 0.0)
-    return sigma2 * ginv / (norms[:, None] * norms[None, :])
+    return sigma2 * support_inverse(rn.T @ rn, support) / (norms[:, None] * norms[None, :])
+
+
+def support_inverse(gram: Float[Array, "terms terms"], support) -> Float[Array, "terms terms"]:
+    """The inverse of `gram` restricted to `support` (fixed shape: identity on the inactive
+    terms, zeros there in the result)."""
+    ginv = inverse(gram + jnp.diag(jnp.where(support, 0.0, 1.0)))
+    return jnp.where(support[:, None] & support[None, :], ginv, 0.0)
 
 
 @eqx.filter_jit

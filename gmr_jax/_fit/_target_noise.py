@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
-from ._householder import inverse
+from ._stls import support_inverse
 
 
 class TargetNoise(eqx.Module):
@@ -57,8 +57,7 @@ def structured_covariance(
     norms = jnp.where(support & (norms > 0), norms, 1.0)
     th = jnp.where(support[None, :], theta / norms[None, :], 0.0)
     wt = weights[:, None] * th
-    g = th.T @ wt + jnp.diag(jnp.where(support, 0.0, 1.0))
-    b = jnp.where(support[:, None] & support[None, :], inverse(g), 0.0)
+    b = support_inverse(th.T @ wt, support)
 
     def filtered(taps):  # H' W Θ, column by column
         return jax.vmap(lambda col: jnp.convolve(col, taps, mode="same"), in_axes=1, out_axes=1)(wt)

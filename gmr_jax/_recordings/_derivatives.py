@@ -25,6 +25,7 @@ second-derivative filter's large centre weight correlates the target's noise wit
 """
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -123,12 +124,13 @@ def savgol_taps(window: int, polyorder: int, order: int, dt: float, exclude_cent
 
 
 def differentiate(
-    x: np.ndarray, dt: float, order: int = 1, window: int | None = None, polyorder: int = 5,
-    exclude_center: bool = False,
+    x: np.ndarray, dt: float, order: int = 1, window: "int | Sequence[int | None] | None" = None,
+    polyorder: int = 5, exclude_center: bool = False,
 ) -> np.ndarray:
     """d^order x / dt^order along axis 0 by Savitzky-Golay differentiation.
 
-    `window` (odd, samples) defaults to `auto_window` of each column. `exclude_center`: each
+    `window` (odd, samples) defaults to `auto_window` of each column; a sequence gives one per
+    column (None: that column's automatic window). `exclude_center`: each
     sample's estimate leaves that sample out (module docstring; the first and last window // 2
     samples keep scipy's edge fit). A wrong argument (NaN in x, dt <= 0, a window not odd or
     longer than x, a constant column with the automatic window) raises `GMRInputError`.
@@ -160,19 +162,24 @@ def differentiate(
         i, k = np.argwhere(~np.isfinite(x))[0]
         raise GMRInputError(f"differentiate: x has NaN/inf (first at sample {i}, column {k}); remove or "
                             f"interpolate them first")
-    if window is not None:
-        window = as_whole_number(window, "differentiate: window", lo=polyorder + 1,
-                                 fix="give an odd number of samples larger than polyorder, or None")
-        if window % 2 == 0 or window > n:
-            raise GMRInputError(f"differentiate: window must be odd and at most {n} (the samples), got {window}")
+    windows = list(window) if isinstance(window, (list, tuple, np.ndarray)) else [window] * x.shape[1]
+    if len(windows) != x.shape[1]:
+        raise GMRInputError(f"differentiate: {len(windows)} windows for {x.shape[1]} columns; give one per "
+                            f"column, one for all, or None")
+    for k, wk in enumerate(windows):
+        if wk is not None:
+            wk = windows[k] = as_whole_number(wk, "differentiate: window", lo=polyorder + 1,
+                                              fix="give an odd number of samples larger than polyorder, or None")
+            if wk % 2 == 0 or wk > n:
+                raise GMRInputError(f"differentiate: window must be odd and at most {n} (the samples), got {wk}")
     from scipy.signal import savgol_filter as _savgol  # imported here: scipy.signal costs ~0.5 s at start-up
 
     out = np.empty_like(x)
     for k in range(x.shape[1]):
-        if window is None and np.ptp(x[:, k]) == 0:
+        if windows[k] is None and np.ptp(x[:, k]) == 0:
             raise GMRInputError(f"differentiate: x of column {k} is constant: no signal to set the window "
                                 f"from (nothing to fit); pass window=, or drop that column")
-        w = window or auto_window(x[:, k], dt, polyorder)
+        w = windows[k] or auto_window(x[:, k], dt, polyorder)
         out[:, k] = _savgol(x[:, k], w, polyorder, deriv=order, delta=dt, mode="interp")
         if exclude_center and n > w:
             half = w // 2

@@ -154,19 +154,22 @@ class Recording:
             info = {**info, "topology": topo.name, "coordinates": (
                 "cell deformations" if topo.name == "chain" else
                 "displacement of each mass relative to the base") + f" ({topo.name})"}
+        def windows(sig):  # chosen once per signal, then applied (and recorded) as chosen
+            return [window or (auto_window(c, self.dt) if np.ptp(c) > 0 else None) for c in sig.T]
+
+        x_windows = windows(x) if v is None or (a is None and self.derivative_source() == "x") else None
         if v is None:
-            v = differentiate(x, self.dt, 1, window)
+            v = differentiate(x, self.dt, 1, x_windows)
             derived.append("v")
         if a is None:
             src, order = ("v", 1) if self.derivative_source() == "v" else ("x", 2)
-            sig = v if src == "v" else x
-            windows = [window or (auto_window(sig[:, k], self.dt) if np.ptp(sig[:, k]) > 0 else None)
-                       for k in range(sig.shape[1])]
-            xdd = differentiate(sig, self.dt, order, window, exclude_center=exclude_center and order == 2)
+            sig_windows = windows(v) if src == "v" else x_windows
+            xdd = differentiate(v if src == "v" else x, self.dt, order, sig_windows,
+                                exclude_center=exclude_center and order == 2)
             b, _ = self.inputs()
             a = topo.absolute(xdd, b)
             derived.append("a")
-            how["a"] = {"from": src, "order": order, "windows": windows, "polyorder": 5,
+            how["a"] = {"from": src, "order": order, "windows": sig_windows, "polyorder": 5,
                         "exclude_center": bool(exclude_center and order == 2)}
         return replace(self, x=x, v=v, a=a, derived=tuple(derived), integration=info, derivation=how or None)
 
