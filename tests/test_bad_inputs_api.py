@@ -256,7 +256,7 @@ CASES = [
     ("sweep_x_tol_zero", lambda: g.SweepSettings(x_tol=0.0), r"SweepSettings.x_tol must be > 0"),
     ("sweep_box_inside_wells", lambda: g.SweepSettings(box_spans=0.2), r"SweepSettings.box_spans must be > 0.5"),
     ("sweep_load", lambda: g.SweepSettings(load="top"), r"SweepSettings.load must be one of \('tip', 'base'\), got 'top'"),
-    ("sweep_batching", lambda: g.SweepSettings(batching="vmap"), r"SweepSettings.batching must be one of \('lanes', 'joint', 'member'\)"),
+    ("sweep_batching", lambda: g.SweepSettings(batching="vmap"), r"SweepSettings.batching must be one of \('auto', 'native', 'lanes', 'joint', 'member'\)"),
     ("sweep_solver", lambda: g.SweepSettings(solver="rk4"), r"SweepSettings.solver must be one of \('tsit5', 'dopri5', 'dopri8'\)"),
     ("sweep_attempts", lambda: g.SweepSettings(attempts_per_pass=0), r"SweepSettings.attempts_per_pass must be an integer >= 1"),
     ("sweep_integrator", lambda: g.SweepSettings(integrator=1e-6), r"SweepSettings.integrator must be a gmr_jax.Integrator"),

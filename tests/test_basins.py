@@ -10,6 +10,13 @@ from gmr_jax._basins._wells import stable_wells
 from gmr_jax._simulate._inputs import HalfSineBase, HalfSineTip
 
 
+def _needs_compiler():
+    from gmr_jax._basins import _native
+
+    if _native.compiler() is None:
+        pytest.skip("no C compiler: the native kernel cannot be built here")
+
+
 def chain():
     terms = []
     for i, (k1, k3) in enumerate([(-30.0, 1e5), (-60.0, 2e5)]):
@@ -53,10 +60,10 @@ def test_no_recompile_for_new_grid_values_or_coefficients():
 
     m = chain()
     wells = stable_wells(m, [[-0.05, 0.05]] * 2)
-    basin_map(m, jnp.array([1.0, 2.0]), jnp.array([1.0]), wells)
+    basin_map(m, jnp.array([1.0, 2.0]), jnp.array([1.0]), wells, settings=SweepSettings(batching="lanes"))
     before = _sweep._sweep_points._cached._cache_size()
     m2 = eqx.tree_at(lambda q: q.stiffness, m, m.stiffness * 1.01)
-    basin_map(m2, jnp.array([1.5, 3.0]), jnp.array([0.7]), wells)
+    basin_map(m2, jnp.array([1.5, 3.0]), jnp.array([0.7]), wells, settings=SweepSettings(batching="lanes"))
     assert _sweep._sweep_points._cached._cache_size() == before
 
 
@@ -83,12 +90,14 @@ def test_sharded_over_two_host_devices_matches_and_does_not_recompile():
         m = g.from_terms([0.05, 0.05], terms, "chain")
         w = stable_wells(m, [[-0.05, 0.05]] * 2)
         f, A = jnp.linspace(0.5, 4, 5), jnp.linspace(0.3, 2.5, 3)
-        two = basin_map(m, f, A, w, chunk=4).value
-        one = basin_map(m, f, A, w, chunk=4, devices=jax.devices()[:1]).value
+        s = _sweep.SweepSettings(batching="lanes")  # the XLA path is what shards over devices
+        two = basin_map(m, f, A, w, chunk=4, settings=s).value
+        one = basin_map(m, f, A, w, chunk=4, devices=jax.devices()[:1], settings=s).value
         assert np.array_equal(np.asarray(two.config), np.asarray(one.config))
         run = _sweep._sharded(tuple(jax.devices()), 4)
         n = run._cached._cache_size()
-        basin_map(m, f + 0.1, A + 0.1, w, chunk=4)
+        assert n >= 1
+        basin_map(m, f + 0.1, A + 0.1, w, chunk=4, settings=s)
         assert run._cached._cache_size() == n
         print("OK")
     """)
@@ -171,9 +180,9 @@ def test_new_settle_time_or_tolerance_does_not_recompile():
 
     m = chain()
     wells = stable_wells(m, [[-0.05, 0.05]] * 2)
-    basin_map(m, jnp.array([1.0, 2.0]), jnp.array([1.0]), wells, settings=SweepSettings(settle_time=3.0))
+    basin_map(m, jnp.array([1.0, 2.0]), jnp.array([1.0]), wells, settings=SweepSettings(settle_time=3.0, batching="lanes"))
     before = _sweep.n_chunk_compiles()
-    basin_map(m, jnp.array([1.0, 2.0]), jnp.array([0.5]), wells, settings=SweepSettings(settle_time=4.0, integrator=g.Integrator(rtol=1e-7, atol=1e-8, max_steps=100_000)))
+    basin_map(m, jnp.array([1.0, 2.0]), jnp.array([0.5]), wells, settings=SweepSettings(settle_time=4.0, integrator=g.Integrator(rtol=1e-7, atol=1e-8, max_steps=100_000), batching="lanes"))
     assert _sweep.n_chunk_compiles() == before
 
 
@@ -264,7 +273,7 @@ def test_lanes_match_member_and_a_tight_reference_with_per_point_steps():
     m = chain()
     wells = stable_wells(m, [[-0.05, 0.05]] * 2)
     f, A = _grid()
-    lanes = basin_map(m, f, A, wells, chunk=8).value  # default batching, 8 lanes: the queue refills them
+    lanes = basin_map(m, f, A, wells, chunk=8, settings=SweepSettings(batching="lanes")).value  # 8 lanes: the queue refills them
     member = basin_map(m, f, A, wells, chunk=8, settings=SweepSettings(batching="member")).value
     joint = basin_map(m, f, A, wells, chunk=8, settings=SweepSettings(batching="joint")).value
     assert np.array_equal(np.asarray(lanes.config), np.asarray(member.config))
@@ -315,14 +324,17 @@ def test_lane_half_period_sin_is_sin_on_the_load_phase():
     np.testing.assert_allclose(np.asarray(_half_period_sin(jnp.asarray([-0.5, 4.0]))), [0.0, 0.0], atol=1e-15)
 
 
-def test_lanes_step_budget_is_per_point():
+@pytest.mark.parametrize("batching", ["lanes", "native"])
+def test_lanes_step_budget_is_per_point(batching):
+    if batching == "native":
+        _needs_compiler()
     m = chain()
     wells = stable_wells(m, [[-0.05, 0.05]] * 2)
     f, A = jnp.array([0.3, 4.5]), jnp.array([0.5, 2.5])
-    free = basin_map(m, f, A, wells).value
+    free = basin_map(m, f, A, wells, settings=SweepSettings(batching=batching)).value
     steps = np.asarray(free.steps)
     budget = int((steps.min() + steps.max()) // 2)
-    st = SweepSettings(integrator=g.Integrator(rtol=1e-6, atol=1e-8, max_steps=budget))
+    st = SweepSettings(integrator=g.Integrator(rtol=1e-6, atol=1e-8, max_steps=budget), batching=batching)
     sol = basin_map(m, f, A, wells, settings=st, throw=False)
     res = np.asarray(sol.value.result)
     over = steps > budget
@@ -334,13 +346,16 @@ def test_lanes_step_budget_is_per_point():
         basin_map(m, f, A, wells, settings=st)
 
 
+@pytest.mark.parametrize("batching", ["lanes", "native"])
 @pytest.mark.parametrize("solver", ["dopri5", "dopri8"])
-def test_lanes_other_pairs_give_the_same_map(solver):
+def test_lanes_other_pairs_give_the_same_map(solver, batching):
+    if batching == "native":
+        _needs_compiler()
     m = chain()
     wells = stable_wells(m, [[-0.05, 0.05]] * 2)
     f, A = _grid()
-    ref = basin_map(m, f, A, wells).value
-    other = basin_map(m, f, A, wells, settings=SweepSettings(solver=solver)).value
+    ref = basin_map(m, f, A, wells, settings=SweepSettings(batching="lanes")).value
+    other = basin_map(m, f, A, wells, settings=SweepSettings(solver=solver, batching=batching)).value
     assert np.array_equal(np.asarray(other.config), np.asarray(ref.config))
     np.testing.assert_allclose(np.asarray(other.x_final), np.asarray(ref.x_final), atol=2e-4)
 
@@ -350,7 +365,9 @@ def test_float32_sweep_agrees_with_float64():
     wells = stable_wells(m, [[-0.05, 0.05]] * 2)
     f, A = _grid()
     ref = basin_map(m, f, A, wells).value
-    lo = basin_map(m, f, A, wells, settings=SweepSettings(precision="float32")).value
+    lo_sol = basin_map(m, f, A, wells, settings=SweepSettings(precision="float32"))
+    assert lo_sol.stats["batching"] == "lanes"  # "auto": the native kernel is float64 only
+    lo = lo_sol.value
     assert lo.x_final.dtype == jnp.float32
     assert np.array_equal(np.asarray(lo.config), np.asarray(ref.config))
     with pytest.raises(g.GMRInputError, match="precision"):

@@ -1,7 +1,9 @@
 """Deployment-basin sweeps over actuation grids (paper Fig. 11, load of Eq. 25): chunked
 diffrax solves, sharded over all devices, every point's result code kept."""
 
+import dataclasses
 import functools
+import warnings
 from collections.abc import Callable
 
 import diffrax as dfx
@@ -18,11 +20,12 @@ from .._model._model import AbstractMechanicalModel
 from .._simulate._inputs import half_sine
 from .._simulate._integrate import Integrator, integrate, vector_field
 from .._solution import RESULTS, Solution, as_result, code_name, raise_if_failed, value_of
+from . import _native
 from ._joint import joint_final_states
 from ._lanes import SOLVERS as LANE_SOLVERS, lanes_final_states
 
 LOADS = ("tip", "base")
-BATCHINGS = ("lanes", "joint", "member")
+BATCHINGS = ("auto", "native", "lanes", "joint", "member")
 SOLVERS = tuple(LANE_SOLVERS)
 PRECISIONS = {"float64": jnp.float64, "float32": jnp.float32}
 
@@ -40,7 +43,12 @@ class SweepSettings(eqx.Module):
       span of each cell's wells) is stopped there and flagged `diverged`.
     - `load`: "tip" (default, Eq. 25: force A sin(2πft) on the last mass for t <= 1/(2f)) or
       "base" (the same half-sine as base acceleration, A in m/s²).
-    - `batching`: "lanes" (default): per-point step control inside one vectorised loop (`_lanes`):
+    - `batching`: "auto" (default): "native" where it applies (a CPU, a `GlobalModel` on a chain
+      or independent DOFs, float64, a C compiler found, one process), else "lanes".
+      "native": the lanes algorithm as a C kernel generated from the model and built with the
+      system's C compiler (`_native`: every stage and the step decision of 8 points at a time
+      in vector registers, all CPU cores through one shared queue; `chunk` and `devices` do not
+      apply); "lanes": per-point step control inside one vectorised XLA loop (`_lanes`):
       `chunk` lanes step together, each point with its own time, step size and accept/reject
       decision, and a lane whose point is done takes the next point of the queue (the step
       count per point is a scalar solver's; no member waits for the slowest); "joint": each
@@ -63,7 +71,7 @@ class SweepSettings(eqx.Module):
     v_tol: float = 0.05
     box_spans: float = 20.0
     load: str = eqx.field(static=True, default="tip")
-    batching: str = eqx.field(static=True, default="lanes")
+    batching: str = eqx.field(static=True, default="auto")
     solver: str = eqx.field(static=True, default="tsit5")
     attempts_per_pass: int = eqx.field(static=True, default=4)
     precision: str = eqx.field(static=True, default="float64")
@@ -204,6 +212,35 @@ def _sharded(devices: tuple, chunk: int):
     return run
 
 
+def resolve_batching(model, settings: SweepSettings, devices) -> str:
+    """The batching a sweep runs with: "auto" resolved (`SweepSettings.batching`); "native" asked
+    for where it cannot run is a `GMRInputError` naming why and the fix."""
+    if settings.batching not in ("auto", "native"):
+        return settings.batching
+    why = None
+    if not _native.supports(model, settings):
+        why = (f"the native kernel integrates a GlobalModel on a chain or independent DOFs in float64 "
+               f"(got {type(model).__name__}, precision {settings.precision})")
+    elif _native.compiler() is None:
+        why = "GMR_NATIVE turns it off" if _native.disabled() else "no C compiler was found ($CC, cc, gcc, clang)"
+    elif jax.process_count() > 1:
+        why = "it runs in one process (use lanes across jax.distributed processes)"
+    elif any(d.platform != "cpu" for d in devices):
+        why = "accelerator devices were given (lanes runs on them)"
+    if why is None:
+        try:
+            _native.kernel(model, settings)  # built (or loaded from disk) here, so a failure is seen here
+            return "native"
+        except (RuntimeError, OSError) as err:
+            why = f"the C kernel did not build: {str(err)[-600:]}"
+            if settings.batching == "auto":
+                warnings.warn(f"basin_map: {why}; the sweep runs with batching='lanes' (GMR_NATIVE=0 skips "
+                              f"the native kernel)", RuntimeWarning, stacklevel=3)
+    if settings.batching == "native":
+        raise GMRInputError(f"batching='native' cannot run here: {why}; use SweepSettings(batching='lanes')")
+    return "lanes"
+
+
 LANES_CPU = 128  # lanes per CPU device ("lanes"; 2 cores, 3 cells: 64-256 within noise, 512 1.7x slower)
 LANES_ACCELERATOR = 32_768  # lanes per GPU/TPU (H100, 5 cells, 1e5 points: 8192 1.6x slower, 1e5 1.2x)
 
@@ -304,6 +341,10 @@ def basin_map(
     structure: new f, A, settle times, tolerances or coefficient values do not recompile.
     """
     f_np, a_np, wells_np, x0_np = _check_inputs(model, f, A, wells, x0)
+    devices = tuple(jax.devices() if devices is None else devices)
+    batching = resolve_batching(model, settings, devices)
+    if batching != settings.batching:
+        settings = dataclasses.replace(settings, batching=batching)
     dtype = PRECISIONS[settings.precision]
     wells = jnp.asarray(wells_np, dtype)
     x0 = wells[:, 0] if x0_np is None else jnp.asarray(x0_np, dtype)
@@ -314,7 +355,12 @@ def basin_map(
     flat_f, flat_a = ff.ravel(), aa.ravel()
     order = np.lexsort((flat_a, flat_f))  # by f, then A: similar actuations share a chunk
     n = flat_f.size
-    devices = tuple(jax.devices() if devices is None else devices)
+    if batching == "native":
+        cat = _native_sweep(model, settings, settings_t, x0, wells, flat_f[order], flat_a[order], progress)
+        first = np.empty(n, int)
+        first[order] = np.arange(n)
+        return _finish(cat, first, f_np, a_np, x0.shape[0], {"chunk": _native.LANES, "devices": 1,
+                                                              "threads": _native.threads()}, batching, throw)
     nd = len(devices)
     if chunk is None:
         accelerator = devices[0].platform != "cpu"
@@ -355,15 +401,45 @@ def basin_map(
     src = layout.ravel()
     first = np.full(n, -1)
     first[src[::-1]] = np.arange(src.size)[::-1]  # first slot holding each point
+    return _finish(cat, first, f_np, a_np, x0.shape[0], {"chunk": chunk, "devices": nd}, batching, throw)
+
+
+def _native_sweep(model, settings, settings_t, x0, wells, fs, amps, progress):
+    """(idx, config, code, x1, v1, steps) of the points (fs, amps) by the native kernel, in
+    up to 20 blocks when `progress` is given (one call otherwise)."""
+    span, centre = (np.asarray(a) for a in _geometry(wells))
+    n = fs.size
+    blocks = 1 if progress is None else int(min(20, max(1, -(-n // (_native.LANES * _native.threads())))))
+    bounds = np.linspace(0, n, blocks + 1).astype(int)
+    parts = []
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        parts.append(_native.native_final_states(model, settings, np.asarray(x0), fs[lo:hi], amps[lo:hi], centre,
+                                                 span))
+        if progress is not None:
+            progress(int(hi), n)
+    x1, v1, code, steps = (np.concatenate([p[j] for p in parts]) for j in range(4))
+    idx, config, code = _classify_points(jnp.asarray(x1), jnp.asarray(v1), jnp.asarray(code), wells,
+                                         jnp.asarray(span), settings_t)
+    return [np.asarray(o) for o in (idx, config, code)] + [x1, v1, steps]
+
+
+@eqx.filter_jit
+def _classify_points(x1, v1, code, wells, span, settings):
+    return jax.vmap(lambda x, v, c: classify(x, v, c, wells, span, settings))(x1, v1, code)
+
+
+def _finish(cat, first, f_np, a_np, d, stats, batching, throw):
+    """The `Solution` of a sweep: per-point outputs `cat` (idx, config, code, x1, v1, steps)
+    taken at `first` (the slot of each grid point, A-major), counts and the failure check."""
     idx, config, code, x1, v1, steps = (o[first] for o in cat)
+    n = first.size
     na, nf = a_np.size, f_np.size
-    d = x0.shape[0]
     bm = BasinMap(f=jnp.asarray(f_np), A=jnp.asarray(a_np), wells=jnp.asarray(idx.reshape(na, nf, d)),
                   config=jnp.asarray(config.reshape(na, nf)), result=jnp.asarray(code.reshape(na, nf)),
                   x_final=jnp.asarray(x1.reshape(na, nf, d)), v_final=jnp.asarray(v1.reshape(na, nf, d)),
                   steps=jnp.asarray(steps.reshape(na, nf)))
     values, counts = np.unique(code, return_counts=True)
-    stats = {"counts": {code_name(v): int(c) for v, c in zip(values, counts)}, "chunk": chunk, "devices": nd}
+    stats = {"counts": {code_name(v): int(c) for v, c in zip(values, counts)}, "batching": batching, **stats}
     outcomes = {value_of(n) for n in ("successful", "diverged", "not_settled")}
     failed = code[~np.isin(code, list(outcomes))]
     result = as_result(int(failed[0])) if failed.size else RESULTS.successful
