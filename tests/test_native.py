@@ -171,3 +171,18 @@ def test_a_compiler_that_fails_falls_back_with_a_warning(monkeypatch, tmp_path):
     assert sol.stats["batching"] == "lanes"
     with pytest.raises(g.GMRInputError, match="did not build"):
         basin_map(m, [1.0], [1.0], wells, settings=SweepSettings(solver="dopri5", batching="native"))
+
+
+def test_a_compiler_without_the_tuned_flags_builds_the_portable_kernel(monkeypatch, tmp_path):
+    """A compiler that refuses the tuned flags (-march=native on some compilers) still gives a
+    kernel, built with the portable ones, and the same answers."""
+    monkeypatch.setenv("GMR_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(_native, "FLAGS", _native.FLAGS + ("-fno-such-flag-for-any-compiler",))
+    m = chain(damping=0.41)
+    wells = stable_wells(m, [[-0.05, 0.05]] * 3)
+    f, A = _grid()
+    nat = basin_map(m, f, A, wells, settings=SweepSettings(batching="native")).value
+    assert len(list((tmp_path / "gmr_native").glob("*.so"))) == 1
+    lan = basin_map(m, f, A, wells, settings=SweepSettings(batching="lanes")).value
+    np.testing.assert_array_equal(np.asarray(nat.config), np.asarray(lan.config))
+    np.testing.assert_allclose(np.asarray(nat.x_final), np.asarray(lan.x_final), atol=1e-7)

@@ -46,7 +46,7 @@ class SweepSettings(eqx.Module):
     - `batching`: "auto" (default): "native" where it applies (a CPU, a `GlobalModel` on a chain
       or independent DOFs, float64, a C compiler found, one process), else "lanes".
       "native": the lanes algorithm as a C kernel generated from the model and built with the
-      system's C compiler (`_native`: every stage and the step decision of 8 points at a time
+      system's C compiler (`_native`: every stage and the step decision of 16 points at a time
       in vector registers, all CPU cores through one shared queue; `chunk` and `devices` do not
       apply); "lanes": per-point step control inside one vectorised XLA loop (`_lanes`):
       `chunk` lanes step together, each point with its own time, step size and accept/reject

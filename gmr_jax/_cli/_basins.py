@@ -27,7 +27,7 @@ def register(sub):
     b.add_argument("--atol", type=tolerance, default=1e-8, help="absolute tolerance, 0 < atol < 1 (default 1e-8)")
     b.add_argument("--batching", choices=["auto", "native", "lanes", "joint", "member"], default="auto",
                    help="auto (default): native on a CPU where it applies, else lanes; native: a C kernel generated "
-                        "from the model (per-point step control, 8 points per vector register, all cores; needs a C "
+                        "from the model (per-point step control, 16 points at a time in vector registers, all cores; needs a C "
                         "compiler, float64 polynomial models); lanes: the same per-point control in a vectorised "
                         "XLA loop (any model, GPUs); joint: each chunk as one ODE with a shared step; member: vmap "
                         "of one solve per point")
