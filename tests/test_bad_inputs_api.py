@@ -257,6 +257,7 @@ CASES = [
     ("sweep_box_inside_wells", lambda: g.SweepSettings(box_spans=0.2), r"SweepSettings.box_spans must be > 0.5"),
     ("sweep_load", lambda: g.SweepSettings(load="top"), r"SweepSettings.load must be one of \('tip', 'base'\), got 'top'"),
     ("sweep_batching", lambda: g.SweepSettings(batching="vmap"), r"SweepSettings.batching must be one of \('auto', 'native', 'lanes', 'joint', 'member'\)"),
+    ("sweep_sign_eps", lambda: g.SweepSettings(sign_eps=-1.0), r"SweepSettings.sign_eps must be >= 0, got -1.0; give the velocity scale"),
     ("sweep_solver", lambda: g.SweepSettings(solver="rk4"), r"SweepSettings.solver must be one of \('tsit5', 'dopri5', 'dopri8'\)"),
     ("sweep_attempts", lambda: g.SweepSettings(attempts_per_pass=0), r"SweepSettings.attempts_per_pass must be an integer >= 1"),
     ("sweep_integrator", lambda: g.SweepSettings(integrator=1e-6), r"SweepSettings.integrator must be a gmr_jax.Integrator"),

@@ -372,3 +372,41 @@ def test_float32_sweep_agrees_with_float64():
     assert np.array_equal(np.asarray(lo.config), np.asarray(ref.config))
     with pytest.raises(g.GMRInputError, match="precision"):
         SweepSettings(precision="float16")
+
+
+# -- Coulomb friction: sgn(v) in a sweep ---------------------------------------------------------
+def _with_friction(level=0.01):
+    terms = []
+    for i, (k1, k3) in enumerate([(-30.0, 1e5), (-60.0, 2e5)]):
+        terms += [{"dof": i, "physics": "stiffness", "order": 1, "coefficient": k1},
+                  {"dof": i, "physics": "stiffness", "order": 3, "coefficient": k3},
+                  {"dof": i, "physics": "velocity_damping", "order": 1, "coefficient": 0.5},
+                  {"dof": i, "physics": "velocity_damping", "order": 0, "coefficient": level}]
+    return g.from_terms([0.05, 0.05], terms, "chain")
+
+
+@pytest.mark.parametrize("batching", ["auto", "lanes"])
+def test_coulomb_friction_is_smoothed_below_the_settled_speed_and_said(batching):
+    """With the exact sgn(v) every point chatters to its step budget (and the error says why);
+    by default sgn(v) -> tanh(v / eps), eps a tenth of the settled-speed test, reported in stats,
+    and the map does not depend on eps (ten times smaller: the same map)."""
+    m = _with_friction()
+    wells = stable_wells(m, [[-0.05, 0.05]] * 2)
+    f, A = jnp.linspace(0.3, 4.5, 5), jnp.linspace(0.2, 2.8, 4)
+    small = g.Integrator(rtol=1e-6, atol=1e-8, max_steps=20_000)
+    exact = basin_map(m, f, A, wells, settings=SweepSettings(sign_eps=0.0, integrator=small, batching=batching),
+                      throw=False)
+    assert exact.stats["sign_eps"] == 0.0
+    assert exact.stats["counts"].get("max_steps_reached", 0) >= 10
+    with pytest.raises(g.GMRComputationError, match="sign_eps at None"):
+        basin_map(m, f, A, wells, settings=SweepSettings(sign_eps=0.0, integrator=small, batching=batching))
+    auto = basin_map(m, f, A, wells, settings=SweepSettings(batching=batching))
+    span = float(np.min(np.nanmax(wells, 1) - np.nanmin(wells, 1)))
+    assert auto.stats["sign_eps"] == pytest.approx(0.1 * 0.05 * span)
+    assert auto.stats["counts"] == {"successful": 20}
+    finer = basin_map(m, f, A, wells, settings=SweepSettings(batching=batching,
+                                                             sign_eps=auto.stats["sign_eps"] / 10))
+    np.testing.assert_array_equal(np.asarray(auto.value.config), np.asarray(finer.value.config))
+    assert len(set(np.asarray(auto.value.config).ravel().tolist())) >= 2
+    # a model without sgn(v) is not touched
+    assert basin_map(chain(), f[:2], A[:1], wells).stats["sign_eps"] is None

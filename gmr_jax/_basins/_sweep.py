@@ -16,7 +16,7 @@ from jax.sharding import PartitionSpec as P
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._errors import GMRInputError, check_real, describe
-from .._model._model import AbstractMechanicalModel
+from .._model._model import AbstractMechanicalModel, GlobalModel
 from .._simulate._inputs import half_sine
 from .._simulate._integrate import Integrator, integrate, vector_field
 from .._solution import RESULTS, Solution, as_result, code_name, raise_if_failed, value_of
@@ -63,6 +63,14 @@ class SweepSettings(eqx.Module):
       faster than 1; compile time grows with it).
     - `precision`: "float64" (default) or "float32" (model, states and grid cast to float32: for
       accelerators; at rtol 1e-6 float32 needs about 3.5x the steps, `results/bench_basins_gpu.md`).
+    - `sign_eps`: how a `GlobalModel`'s Coulomb friction (`velocity_damping` order 0, sgn(v)) is
+      integrated. With the exact sgn(v) an adaptive solver chatters around v = 0 once a cell
+      stops, and every point ends `max_steps_reached`. None (default): when the model has such a
+      term and its own `sign_eps` is 0, sgn(v) becomes tanh(v / eps) with
+      eps = 0.1 · `v_tol` · (smallest span of the wells), so the friction is exact (to 4e-9)
+      at every speed above a tenth of the settled-speed test: only motion already counted as
+      settled is smoothed (it creeps instead of sticking). The value used is
+      `stats["sign_eps"]`. A number: that eps (0.0: the exact sgn).
     """
 
     settle_time: float = 10.0
@@ -75,6 +83,7 @@ class SweepSettings(eqx.Module):
     solver: str = eqx.field(static=True, default="tsit5")
     attempts_per_pass: int = eqx.field(static=True, default=4)
     precision: str = eqx.field(static=True, default="float64")
+    sign_eps: float | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
         # plain Python on concrete values; tracers (settings built inside jit) are not inspected
@@ -99,6 +108,10 @@ class SweepSettings(eqx.Module):
         check_real(self.box_spans, "SweepSettings.box_spans", lo=0.5, lo_open=True,
                    fix="the divergence box must contain the wells (they lie within 0.5 span of the "
                        "centre); e.g. 20.0")
+        if self.sign_eps is not None:
+            check_real(self.sign_eps, "SweepSettings.sign_eps", lo=0.0,
+                       fix="give the velocity scale of the tanh that replaces sgn(v), >= 0 (0: the exact sgn), "
+                           "or None for the automatic one")
         if not isinstance(self.integrator, Integrator):
             raise GMRInputError(f"SweepSettings.integrator must be a gmr_jax.Integrator, got "
                                 f"{type(self.integrator).__name__}")
@@ -210,6 +223,23 @@ def _sharded(devices: tuple, chunk: int):
                              check_vma=False)(fs, amps)
 
     return run
+
+
+def friction_smoothing(model, settings: SweepSettings, wells) -> tuple:
+    """(model, eps): the model with its sgn(v) as tanh(v / eps) where `settings.sign_eps` asks
+    for it (see `SweepSettings`), and the eps in use (None: the model has no sgn(v) term or is
+    not a `GlobalModel`; its own value where it set one)."""
+    if not isinstance(model, GlobalModel) or not np.any(np.asarray(model.velocity_damping)[:, 0] != 0.0):
+        return model, None
+    if model.sign_eps != 0.0 and settings.sign_eps is None:
+        return model, float(model.sign_eps)
+    if settings.sign_eps is None:
+        span = np.nanmax(wells, axis=1) - np.nanmin(wells, axis=1)
+        span = span[span > 0]
+        eps = 0.1 * float(settings.v_tol) * (float(span.min()) if span.size else 1.0)
+    else:
+        eps = float(settings.sign_eps)
+    return model.with_sign_eps(eps), eps
 
 
 def resolve_batching(model, settings: SweepSettings, devices) -> str:
@@ -341,6 +371,7 @@ def basin_map(
     structure: new f, A, settle times, tolerances or coefficient values do not recompile.
     """
     f_np, a_np, wells_np, x0_np = _check_inputs(model, f, A, wells, x0)
+    model, sign_eps = friction_smoothing(model, settings, wells_np)
     devices = tuple(jax.devices() if devices is None else devices)
     batching = resolve_batching(model, settings, devices)
     if batching != settings.batching:
@@ -360,7 +391,8 @@ def basin_map(
         first = np.empty(n, int)
         first[order] = np.arange(n)
         return _finish(cat, first, f_np, a_np, x0.shape[0], {"chunk": _native.LANES, "devices": 1,
-                                                              "threads": _native.threads()}, batching, throw)
+                                                              "threads": _native.threads(), "sign_eps": sign_eps},
+                       batching, throw)
     nd = len(devices)
     if chunk is None:
         accelerator = devices[0].platform != "cpu"
@@ -401,7 +433,8 @@ def basin_map(
     src = layout.ravel()
     first = np.full(n, -1)
     first[src[::-1]] = np.arange(src.size)[::-1]  # first slot holding each point
-    return _finish(cat, first, f_np, a_np, x0.shape[0], {"chunk": chunk, "devices": nd}, batching, throw)
+    return _finish(cat, first, f_np, a_np, x0.shape[0], {"chunk": chunk, "devices": nd, "sign_eps": sign_eps},
+                   batching, throw)
 
 
 def _native_sweep(model, settings, settings_t, x0, wells, fs, amps, progress):
@@ -444,6 +477,9 @@ def _finish(cat, first, f_np, a_np, d, stats, batching, throw):
     failed = code[~np.isin(code, list(outcomes))]
     result = as_result(int(failed[0])) if failed.size else RESULTS.successful
     detail = f"{failed.size} of {n} points: " + ", ".join(f"{k} {c}" for k, c in stats["counts"].items())
+    if stats.get("sign_eps") == 0.0 and "max_steps_reached" in stats["counts"]:
+        detail += ("; the model's exact sgn(v) (Coulomb friction) makes an adaptive solver chatter where a cell "
+                   "stops: leave SweepSettings.sign_eps at None (tanh smoothing below the settled speed)")
     return raise_if_failed(Solution(value=bm, result=result, stats=stats), throw, "basin_map", detail)
 
 

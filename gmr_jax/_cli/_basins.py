@@ -109,6 +109,9 @@ def run(args) -> int:
         why = ", ".join(f"{c} {code_name(k).replace('_', ' ')}" for k, c in zip(codes, cc))
         print(f"  -1 (not classified): {why}")
     comp = _compile_seconds() - compiled_before
+    if sol.stats.get("sign_eps"):
+        print(f"  Coulomb friction sgn(v) integrated as tanh(v / {sol.stats['sign_eps']:.3g}): exact above a tenth "
+              f"of the settled-speed test (SweepSettings.sign_eps)")
     print(f"{n} points in {wall:.1f} s ({n / wall:.0f} trajectories/s, batching {sol.stats['batching']}); of which "
           f"compiling {comp:.1f} s" + ("" if comp > 0 else " (compiled programs loaded from the cache)"))
     print(f"wrote {out}/basins.npz and basins.png (.pdf)")
