@@ -1,5 +1,6 @@
-"""Deployment-basin sweeps over actuation grids (paper Fig. 11, load of Eq. 25): chunked
-diffrax solves, sharded over all devices, every point's result code kept."""
+"""Deployment-basin sweeps over actuation grids (paper Fig. 11, load of Eq. 25): on a CPU the
+model's own C kernel (`_native`), else vectorised XLA loops or chunked diffrax solves sharded
+over all devices; every point's result code kept."""
 
 import dataclasses
 import functools
@@ -184,7 +185,7 @@ def _chunk(model, settings, x0, wells, fs, amps):
         # a failed joint solve (max_steps, step-size collapse) is re-run point by point, so one
         # hard point costs its chunk time but not its neighbours' answers
         x1, v1, code, steps = jax.lax.cond(ok, lambda: (x1, v1, code, steps), lambda: members(fs, amps))
-    idx, config, code = jax.vmap(lambda x, v, c: classify(x, v, c, wells, span, settings))(x1, v1, code)
+    idx, config, code = _classify_all(x1, v1, code, wells, span, settings)
     return idx, config, code, x1, v1, steps
 
 
@@ -193,7 +194,7 @@ def _lanes(model, settings, x0, wells, fs, amps, lanes: int):
     span, centre = _geometry(wells)
     x1, v1, code, steps = lanes_final_states(model, settings, x0, fs, amps, centre, span, lanes, settings.solver,
                                              settings.attempts_per_pass)
-    idx, config, code = jax.vmap(lambda x, v, c: classify(x, v, c, wells, span, settings))(x1, v1, code)
+    idx, config, code = _classify_all(x1, v1, code, wells, span, settings)
     return idx, config, code, x1, v1, steps
 
 
@@ -345,13 +346,15 @@ def basin_map(
     - `wells`: (dof, max_wells) stable equilibria per cell (`stable_wells`), ordered.
     - `x0`: start (default: every cell in its first well, at rest).
     - `settings`: `SweepSettings` (tolerances, settling, classification, load, batching).
-    - `chunk`: under "lanes" batching the number of lanes per device (default 128 on a CPU,
+    - `chunk`: (not for "native", which runs 16 points per group on every core) under "lanes"
+      batching the number of lanes per device (default 128 on a CPU,
       32768 on a GPU/TPU); under "joint"/"member" the points integrated together (default
       `default_chunk(dof)`: 512, 256, 128 points for 3, 5, 10 DOFs). Points are ordered by
       (f, A) before chunking, so neighbouring lanes and chunks hold similar actuations. The integrator's memory is per chunk; what grows with the
       grid is the returned map and its copies, about 0.6-0.7 kB per point at peak (1e6 points:
       1.1 GB in all, `results/bench_basins_memory.md`).
-    - `devices`: devices to shard the grid over (default: all of `jax.devices()`); chunks are
+    - `devices`: devices to shard the grid over (default: all of `jax.devices()`; "native" runs
+      on the host's cores, and "auto" takes "lanes" when accelerators are given); chunks are
       dealt to a 1-D `shard_map` mesh in turn, so several CPU host devices, GPUs or TPUs (and
       several hosts after `jax.distributed.initialize()`) share the work evenly.
     - `progress`: optional `progress(done, total)` called after each block of chunks (the grid
@@ -365,7 +368,8 @@ def basin_map(
     `BasinMap.result`. The Solution's `result` is `successful` unless the integrator failed on
     some point (then the first such code); a point that `diverged` (left the divergence box) or
     was `not_settled` is an outcome of the model, counted in `stats["counts"]` (points per
-    code name).
+    code name). `stats["batching"]` is the path that ran ("native", "lanes", ...) and
+    `stats["sign_eps"]` the smoothing of a Coulomb term (None: the model has none).
 
     Compiled shapes depend only on the number of points, `chunk`, the devices and the model's
     structure: new f, A, settle times, tolerances or coefficient values do not recompile.
@@ -456,9 +460,12 @@ def _native_sweep(model, settings, settings_t, x0, wells, fs, amps, progress):
     return [np.asarray(o) for o in (idx, config, code)] + [x1, v1, steps]
 
 
-@eqx.filter_jit
-def _classify_points(x1, v1, code, wells, span, settings):
+def _classify_all(x1, v1, code, wells, span, settings):
+    """`classify` over the points (leading axis of x1, v1, code)."""
     return jax.vmap(lambda x, v, c: classify(x, v, c, wells, span, settings))(x1, v1, code)
+
+
+_classify_points = eqx.filter_jit(_classify_all)  # the native path's final states come from outside jit
 
 
 def _finish(cat, first, f_np, a_np, d, stats, batching, throw):
