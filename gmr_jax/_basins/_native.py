@@ -34,6 +34,7 @@ import shutil
 import subprocess
 import tempfile
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -55,6 +56,7 @@ FLAGS = ("-O3", "-march=native", *(("-mprefer-vector-width=512",) if _X86 else (
 PORTABLE_FLAGS = ("-O3", "-fno-math-errno", "-fno-trapping-math", "-shared", "-fPIC")
 _lock = threading.Lock()
 _loaded: dict = {}  # key -> loaded library, or the RuntimeError of its failed build (not retried)
+BUILD_SECONDS = [0.0]  # C compile time of this process (the command line reports it with XLA's)
 
 
 def _r(v: float) -> str:
@@ -322,11 +324,14 @@ def _compile(cc: str, flags: tuple, source: str, lib_path: Path) -> str | None:
         src = Path(tmp) / "sweep.c"
         src.write_text(source)
         out = Path(tmp) / "sweep.so"
+        t0 = time.perf_counter()
         try:
             p = subprocess.run([cc, *flags, "-o", str(out), str(src), "-lm"], capture_output=True, text=True,
                                timeout=300)
         except (OSError, subprocess.SubprocessError) as err:
             return f"{cc} did not run: {err}"
+        finally:
+            BUILD_SECONDS[0] += time.perf_counter() - t0
         if p.returncode != 0:
             return f"{cc} {' '.join(flags)} failed: {p.stderr[-1500:]}"
         os.replace(out, lib_path)

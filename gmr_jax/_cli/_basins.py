@@ -45,8 +45,10 @@ _COMPILE = {"seconds": 0.0, "listening": False}
 
 
 def _compile_seconds() -> float:
-    """XLA compile time of this process so far (one listener, registered on first use: a second
-    `run` in the same process, e.g. in tests, does not add another)."""
+    """XLA and C (native kernel) compile time of this process so far (one listener, registered
+    on first use: a second `run` in the same process, e.g. in tests, does not add another)."""
+    from .._basins._native import BUILD_SECONDS
+
     if not _COMPILE["listening"]:
         import jax
 
@@ -56,7 +58,7 @@ def _compile_seconds() -> float:
 
         jax.monitoring.register_event_duration_secs_listener(listen)
         _COMPILE["listening"] = True
-    return _COMPILE["seconds"]
+    return _COMPILE["seconds"] + BUILD_SECONDS[0]
 
 
 def run(args) -> int:
