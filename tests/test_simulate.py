@@ -80,3 +80,31 @@ def test_declared_sample_times_cut_rejected_steps_on_a_rough_input(rng):
     a, b = runs[False], runs[True]
     np.testing.assert_allclose(np.asarray(b.value[0]), np.asarray(a.value[0]), atol=1e-4 * float(jnp.max(jnp.abs(a.value[0]))))
     assert int(b.stats["num_rejected_steps"]) < 0.2 * int(a.stats["num_rejected_steps"])
+
+
+def test_a_failed_solve_outside_jit_is_a_named_error_and_coulomb_friction_says_the_fix():
+    """With concrete arguments and throw=True a failure is a GMRComputationError naming the code
+    (not equinox's runtime error with a JAX trace); a model with the exact sgn(v) chatters to
+    its step budget, and the error says how to integrate it; inside jit the old raise stays."""
+    terms = [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -10.0},
+             {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 11111.0},
+             {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.8},
+             {"dof": 0, "physics": "velocity_damping", "order": 0, "coefficient": 0.01}]
+    m = g.from_terms([0.05], terms, "chain")
+    ts = jnp.linspace(0.0, 12.0, 121)
+    small = g.Integrator(max_steps=4000)
+    with pytest.raises(g.GMRComputationError, match="max_steps_reached") as err:
+        g.simulate(m, g.HalfSineTip(1.0, 0.2, n_dof=1), ts, jnp.array([-0.03]), integrator=small)
+    assert "with_sign_eps" in str(err.value) and err.value.name == "max_steps_reached"
+    smooth = g.simulate(m.with_sign_eps(1e-4), g.HalfSineTip(1.0, 0.2, n_dof=1), ts, jnp.array([-0.03]),
+                        integrator=g.Integrator(max_steps=100_000))
+    assert smooth.ok and np.min(np.abs(float(smooth.value[0][-1, 0]) - np.array([-0.03, 0.03]))) < 0.003
+    # a model without sgn(v) that diverges: the named code, no friction hint
+    bad = g.from_terms([1.0], [{"dof": 0, "physics": "stiffness", "order": 3, "coefficient": -1e3}], "chain")
+    with pytest.raises(g.GMRComputationError, match="diverged") as err:
+        g.simulate(bad, g.NoInput(), ts, jnp.array([0.5]), box=10.0)
+    assert "with_sign_eps" not in str(err.value)
+    import equinox as eqx
+
+    with pytest.raises((eqx.EquinoxRuntimeError, jax.errors.JaxRuntimeError)):
+        jax.jit(lambda x0: g.simulate(bad, g.NoInput(), ts, x0, box=10.0).value[0])(jnp.array([0.5]))

@@ -2,13 +2,14 @@
 
 import diffrax as dfx
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .._errors import GMRInputError, check_real, describe, is_tracer
 from .._model._model import AbstractMechanicalModel
-from .._solution import RESULTS, Solution, error_if_failed
+from .._solution import RESULTS, Solution, code_name, error_if_failed, raise_if_failed
 from ._inputs import AbstractInput
 from ._integrate import Integrator, integrate, vector_field
 
@@ -38,7 +39,9 @@ def simulate(
     - `integrator`: tolerances and step budget (`Integrator`).
     - `box`: divergence box on x: a number b (|x| <= b) or `(lo, hi)` arrays; leaving it stops
       the solve with `RESULTS.diverged`.
-    - `throw`: raise on failure (use `False` under vmap and read `result`).
+    - `throw`: raise on failure (use `False` under vmap and read `result`): called with
+      concrete values, a `GMRComputationError` naming the code (and, for a model with the
+      exact sgn(v) of Coulomb friction, the fix); inside jit/vmap/grad, equinox's runtime error.
 
     **Returns:** a `Solution` with `value = (x (times, dof), v (times, dof))`, `result` (a
     failed or diverged solve is flagged, its values NaN), `stats` with the step counts.
@@ -65,7 +68,30 @@ def simulate(
         ((5, 1), 1.0)
     """
     _check_inputs(model, inputs, ts, x0, v0, integrator, box)
-    return _simulate(model, inputs, ts, x0, v0, integrator, box=box, throw=throw)
+    traced = any(is_tracer(leaf) for leaf in jax.tree.leaves((model, inputs, ts, x0, v0, integrator, box)))
+    if traced or not throw:  # inside jit/vmap/grad a failure can only be raised from inside
+        return _simulate(model, inputs, ts, x0, v0, integrator, box=box, throw=throw)
+    sol = _simulate(model, inputs, ts, x0, v0, integrator, box=box, throw=False)
+    return raise_if_failed(sol, True, "simulate", _failure_hint(model, sol))
+
+
+def _failure_hint(model, sol) -> str:
+    """What to do about a failed solve that the code's message alone does not say."""
+    if code_name(sol.result) != "successful" and exact_coulomb(model):
+        return ("the model has Coulomb friction sgn(v) (velocity_damping order 0) with the exact sign: an "
+                "adaptive solver chatters where a mass stops (v = 0); integrate model.with_sign_eps(eps), "
+                "sgn(v) -> tanh(v / eps), with eps well below the speeds that matter (e.g. 1e-3 x the RMS "
+                "velocity)")
+    steps = sol.stats.get("num_steps") if isinstance(sol.stats, dict) else None
+    return "" if steps is None else f"{int(np.asarray(steps))} steps"
+
+
+def exact_coulomb(model) -> bool:
+    """Whether a `GlobalModel` has a sgn(v) term integrated with the exact (discontinuous) sign."""
+    from .._model._model import GlobalModel
+
+    return (isinstance(model, GlobalModel) and model.sign_eps == 0.0
+            and bool(np.any(np.asarray(model.velocity_damping)[:, 0] != 0.0)))
 
 
 def _check_inputs(model, inputs, ts, x0, v0, integrator, box):
