@@ -273,24 +273,6 @@ def test_least_risk_degree_takes_the_lower_degree_within_one_standard_error():
     assert err[1] < 0.5 * err[0], err
 
 
-@pytest.mark.slow  # torque-free 5-cell training data, one reconstruction (~1 min)
-def test_torque_free_kresling_seed_4_cells_take_the_septic_within_one_standard_error():
-    # issue 15: 1 mm seed 4, cells 3-4 borrowed q^2..q^4; the septics' estimated risks were within
-    # their standard errors of the nonics' (and a little above): the nonics kept by the least
-    # estimate were 2.46 / 7.08 % off the truth, the septics are 0.54 / 1.23 %; cell 2 keeps its nonic
-    system, ((res, errs),) = _kresling_1mm(4, {}, twist="torque_free")
-    assert max(errs) < 0.03, errs
-    for c in (2, 3):
-        st = res.stats["dofs"][c].stats
-        assert st["shared_design"]["used"] and int(st["K_r"]) == 7 and errs[c] < 0.02, (c, st["K_r"], errs)
-    assert int(res.stats["dofs"][1].stats["K_r"]) == 9 and errs[1] < 0.01
-    # the error measured apart from the tool's metric: NumPy polynomial against the truth's force
-    xs = np.linspace(*system.x_range[3], 401)
-    truth = np.asarray(jax.vmap(lambda v: system.truth.restoring(jnp.full(5, v))[3])(jnp.asarray(xs)))
-    fit = np.polynomial.polynomial.polyval(xs, np.asarray(res.value.stiffness[3]))
-    assert np.linalg.norm(fit - truth) / np.linalg.norm(truth) < 0.02
-
-
 @pytest.mark.slow
 def test_an_even_law_gives_way_to_the_joint_one_even_where_no_motion_reaches_its_escape():
     """Magnetic bistable, 30 dB, most excited well at 0.45 % of the interwell distance, seed 1:
@@ -363,13 +345,24 @@ def test_nominal_kresling_one_well_term_gives_an_odd_quintic_not_the_exact_sexti
 
 
 @pytest.mark.slow  # torque-free 5-cell training data, one reconstruction (~1 min)
-def test_torque_free_kresling_borrowed_nonic_gives_way_to_the_septic_of_lower_risk():
-    # issue 15: 1 mm seed 1, cells 4-5 borrowed q^2..q^4; the exact nonics through the borrowed q^4
-    # (3-4 % off the truth: the donor's truncation bias) were 3.83 / 2.70 % off; the septics, of lower
-    # estimated risk over the span, 1.34 / 1.37 % (`least_risk_degree`)
-    _, ((res, errs),) = _kresling_1mm(1, {}, twist="torque_free")
+@pytest.mark.parametrize("seed, cells", [(1, (3, 4)), (4, (2, 3))])
+def test_torque_free_kresling_borrowed_nonic_gives_way_to_the_septic_of_lower_risk(seed, cells):
+    # issue 15: 1 mm, cells that borrowed q^2..q^4. Seed 1 cells 4-5: the exact nonics through the
+    # borrowed q^4 (3-4 % off the truth: the donor's truncation bias) were 3.83 / 2.70 % off; the
+    # septics, of lower estimated risk over the span, 1.34 / 1.37 % (`least_risk_degree`, stop 31).
+    # Seed 4 cells 3-4: the septics' estimated risks were a little above the nonics' but within one
+    # standard error; the nonics, kept by the least estimate, were 2.46 / 7.08 % off, the septics
+    # 0.54 / 1.23 % (stop 34); cell 2 keeps its nonic there
+    system, ((res, errs),) = _kresling_1mm(seed, {}, twist="torque_free")
     assert max(errs) < 0.03, errs
-    for c in (3, 4):
+    for c in cells:
         st = res.stats["dofs"][c].stats
         assert st["shared_design"]["used"] and int(st["K_r"]) == 7 and errs[c] < 0.02, (c, st["K_r"], errs)
         assert any("degree 7 instead of 9" in w for w in st["paper_route_rejected"])
+        # the error measured apart from the tool's metric: NumPy polynomial against the truth's force
+        xs = np.linspace(*system.x_range[c], 401)
+        truth = np.asarray(jax.vmap(lambda v, c=c: system.truth.restoring(jnp.full(5, v))[c])(jnp.asarray(xs)))
+        fit = np.polynomial.polynomial.polyval(xs, np.asarray(res.value.stiffness[c]))
+        assert np.linalg.norm(fit - truth) / np.linalg.norm(truth) < 0.02
+    if seed == 4:
+        assert int(res.stats["dofs"][1].stats["K_r"]) == 9 and errs[1] < 0.01
