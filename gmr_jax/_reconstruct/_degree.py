@@ -122,41 +122,28 @@ def least_risk_degree(coord: Solution, fits: LocalFit, library: Library, energy:
     E[(F_k - F_K)^2] = bias_k^2 + var F_K - var F_k, and bias_k^2 + var F_k (its risk) is
     estimated without bias by (F_k - F_K)^2 - var F_K + 2 var F_k (Mallows' C_p on the law's
     values); F_K's risk is var F_K. Candidates must be admissible as `confine_borrowed` demands
-    (`admissible`). Of these the lowest degree whose estimated risk is within one standard error
-    of the least is taken (the one-standard-error rule of model selection: the estimate is noisy,
-    and the higher degree's var F_K counts the borrowed orders' variance but not their bias).
-    The standard error: with e = F_k - F_K ~ N(mu, w), w = var F_K - var F_k, the estimate e^2 has
-    variance 2 w^2 + 4 mu^2 w; its mean over the span is taken as fully correlated between points,
-    sqrt(2 w^2 + 4 e^2 w) averaged. Torque-free chain, 1 mm, seed 4: cells 3 and 4 had estimated
-    risks 1.12e-4 / 8.7e-5 and 1.53e-3 / 1.38e-3 (septic / nonic), the nonics were kept and were
-    2.46 / 7.08 % off the truth, the septics 0.54 / 1.23 %; their standard errors 2.8e-4 and
-    4.4e-3 put the septics within one. Cell 2 (risk 3.7e-5 against 4.6e-6, standard error 2.8e-5)
-    keeps its nonic (0.30 %; the septic 1.96 %). Returns `(coord, notes)`;
+    (`admissible`). Returns `(coord, notes)`;
     a lower law carries its bound in `stats["max_degree_r"]`."""
     eq = np.asarray(fits.equilibrium, float)
     span = float(eq.max() - eq.min())
     x = np.linspace(eq.min() - 0.1 * span, eq.max() + 0.1 * span, 201)
     f_top, v_top = span_curve(coord, x)
+    best, best_risk, notes = coord, float(np.mean(v_top)), []
     top = int(coord.stats["K_r"])
-    cands = [(top, coord, float(np.mean(v_top)), 0.0)]  # (degree, law, estimated risk, its standard error)
     for k in range(top - 2, 2 * eq.size - 2, -2):
         alt = odd_gls(fits, library, k)
         if alt is None or not admissible(alt.value.stiffness, eq, energy):
             continue
         f_k, v_k = span_curve(alt, x)
-        d2, w = (f_k - f_top) ** 2, np.maximum(v_top - v_k, 0.0)
-        cands.append((k, alt, float(np.mean(d2 + 2.0 * v_k - v_top)), float(np.mean(np.sqrt(2 * w**2 + 4 * d2 * w)))))
-    floor = min(c[2] for c in cands)
-    # the lowest degree whose estimated risk is within one standard error of the least
-    deg, best, best_risk, _ = min((c for c in cands if c[2] - c[3] <= floor), key=lambda c: c[0])
-    notes = []
+        risk = float(np.mean((f_k - f_top) ** 2 + 2.0 * v_k - v_top))
+        if risk < best_risk:
+            alt.stats["max_degree_r"] = k
+            best, best_risk = alt, risk
     if best is not coord:
-        best.stats["max_degree_r"] = deg
         scale = float(np.max(np.abs(f_top)))
         low = (f"{100 * np.sqrt(best_risk) / scale:.2g} %" if best_risk > 0
                else "within the estimate's noise of 0")  # the unbiased estimate can fall below 0
-        notes.append(f"degree {int(best.stats['K_r'])} instead of {top}: its estimated rms error over the span "
-                     f"({low} against {100 * np.sqrt(float(np.mean(v_top))) / scale:.2g} % of the force scale) "
-                     f"is within one standard error of the least (the exact degree {top} passes the borrowed "
-                     f"orders' error on, amplified)")
+        notes.append(f"degree {int(best.stats['K_r'])} instead of {top}: its estimated rms error over the span is "
+                     f"lower ({low} against {100 * np.sqrt(float(np.mean(v_top))) / scale:.2g} % of the force "
+                     f"scale: the exact degree {top} passes the borrowed orders' error on, amplified)")
     return best, notes
