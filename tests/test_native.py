@@ -150,7 +150,11 @@ def test_diverged_and_step_budget_are_flagged_like_lanes():
 def test_auto_picks_native_and_falls_back(monkeypatch):
     m = chain()
     wells = stable_wells(m, [[-0.05, 0.05]] * 3)
-    assert basin_map(m, [1.0], [1.0], wells).stats["batching"] == "native"
+    sol = basin_map(m, [1.0], [1.0], wells)
+    assert sol.stats["batching"] == "native" and sol.stats["threads"] == _native.threads()
+    import jax
+
+    assert basin_map(m, [1.0], [1.0], wells, devices=jax.devices()[:1]).stats["threads"] == 1  # one per device given
     # float32 takes the lanes path (the kernel is float64)
     assert basin_map(m, [1.0], [1.0], wells, settings=SweepSettings(precision="float32")).stats["batching"] == "lanes"
     with pytest.raises(g.GMRInputError, match="native.*float64"):

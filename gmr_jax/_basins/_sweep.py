@@ -354,7 +354,8 @@ def basin_map(
       grid is the returned map and its copies, about 0.6-0.7 kB per point at peak (1e6 points:
       1.1 GB in all, `results/bench_basins_memory.md`).
     - `devices`: devices to shard the grid over (default: all of `jax.devices()`; "native" runs
-      on the host's cores, and "auto" takes "lanes" when accelerators are given); chunks are
+      one thread per device given, every core of the host by default, and "auto" takes "lanes"
+      when accelerators are given); chunks are
       dealt to a 1-D `shard_map` mesh in turn, so several CPU host devices, GPUs or TPUs (and
       several hosts after `jax.distributed.initialize()`) share the work evenly.
     - `progress`: optional `progress(done, total)` called after each block of chunks (the grid
@@ -376,6 +377,7 @@ def basin_map(
     """
     f_np, a_np, wells_np, x0_np = _check_inputs(model, f, A, wells, x0)
     model, sign_eps = friction_smoothing(model, settings, wells_np)
+    n_threads = None if devices is None else len(devices)  # native: one thread per device given, else every core
     devices = tuple(jax.devices() if devices is None else devices)
     batching = resolve_batching(model, settings, devices)
     if batching != settings.batching:
@@ -391,11 +393,12 @@ def basin_map(
     order = np.lexsort((flat_a, flat_f))  # by f, then A: similar actuations share a chunk
     n = flat_f.size
     if batching == "native":
-        cat = _native_sweep(model, settings, settings_t, x0, wells, flat_f[order], flat_a[order], progress)
+        cat = _native_sweep(model, settings, settings_t, x0, wells, flat_f[order], flat_a[order], progress, n_threads)
         first = np.empty(n, int)
         first[order] = np.arange(n)
         return _finish(cat, first, f_np, a_np, x0.shape[0], {"chunk": _native.LANES, "devices": 1,
-                                                              "threads": _native.threads(), "sign_eps": sign_eps},
+                                                              "threads": n_threads or _native.threads(),
+                                                              "sign_eps": sign_eps},
                        batching, throw)
     nd = len(devices)
     if chunk is None:
@@ -441,17 +444,19 @@ def basin_map(
                    batching, throw)
 
 
-def _native_sweep(model, settings, settings_t, x0, wells, fs, amps, progress):
-    """(idx, config, code, x1, v1, steps) of the points (fs, amps) by the native kernel, in
-    up to 20 blocks when `progress` is given (one call otherwise)."""
+def _native_sweep(model, settings, settings_t, x0, wells, fs, amps, progress, n_threads=None):
+    """(idx, config, code, x1, v1, steps) of the points (fs, amps) by the native kernel on
+    `n_threads` threads (default: every core), in up to 20 blocks when `progress` is given (one
+    call otherwise)."""
     span, centre = (np.asarray(a) for a in _geometry(wells))
     n = fs.size
-    blocks = 1 if progress is None else int(min(20, max(1, -(-n // (_native.LANES * _native.threads())))))
+    nt = n_threads or _native.threads()
+    blocks = 1 if progress is None else int(min(20, max(1, -(-n // (_native.LANES * nt)))))
     bounds = np.linspace(0, n, blocks + 1).astype(int)
     parts = []
     for lo, hi in zip(bounds[:-1], bounds[1:]):
         parts.append(_native.native_final_states(model, settings, np.asarray(x0), fs[lo:hi], amps[lo:hi], centre,
-                                                 span))
+                                                 span, n_threads=nt))
         if progress is not None:
             progress(int(hi), n)
     x1, v1, code, steps = (np.concatenate([p[j] for p in parts]) for j in range(4))

@@ -35,7 +35,7 @@ def register(sub):
                    help="lanes per device (lanes: default 128 on a CPU, 32768 on a GPU) or points integrated "
                         "together (joint, member: default about 1280 / DOFs, 64-512)")
     b.add_argument("--cpu-devices", type=positive_int, default=None,
-                   help="CPU cores to shard over (default: all; ignored on GPU/TPU)")
+                   help="CPU cores to use (default: all; ignored on GPU/TPU)")
     b.add_argument("--out", required=True)
     b.set_defaults(fn=run)
     return b
@@ -92,7 +92,7 @@ def run(args) -> int:
     compiled_before = _compile_seconds()
     stage(f"integrating {n} trajectories (compiling unless the compilation cache has it)")
     sol = gmr.basin_map(model, f, A, wells, x0=x0, settings=settings, chunk=args.chunk, progress=progress,
-                        throw=False)
+                        throw=False, devices=None if args.cpu_devices is None else devs)
     bm = sol.value
     wall = time.perf_counter() - t0
     print()
