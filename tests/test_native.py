@@ -169,6 +169,7 @@ def test_a_compiler_that_fails_falls_back_with_a_warning(monkeypatch, tmp_path):
     monkeypatch.setenv("CC", "false")
     monkeypatch.setenv("GMR_CACHE_DIR", str(tmp_path))  # no kernel already on disk
     monkeypatch.setattr(_native, "_loaded", {})
+    monkeypatch.setattr(_native, "_by_structure", {})
     m = chain(damping=0.37)
     wells = stable_wells(m, [[-0.05, 0.05]] * 3)
     with pytest.warns(RuntimeWarning, match="did not build"):
@@ -184,6 +185,7 @@ def test_a_compiler_without_the_tuned_flags_builds_the_portable_kernel(monkeypat
     monkeypatch.setenv("GMR_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(_native, "FLAGS", _native.FLAGS + ("-fno-such-flag-for-any-compiler",))
     monkeypatch.setattr(_native, "_loaded", {})  # nothing built in this process either
+    monkeypatch.setattr(_native, "_by_structure", {})
     m = chain(damping=0.41)
     wells = stable_wells(m, [[-0.05, 0.05]] * 3)
     f, A = _grid()

@@ -381,9 +381,16 @@ def _codes() -> dict:
                                                           "simulation_failed")}
 
 
+_by_structure: dict = {}  # (structure, load, pair) -> library: the source is not regenerated per call
+
+
 def kernel(model, settings) -> ctypes.CDLL:
     """The built kernel for this model's structure, load and Runge-Kutta pair (`build`)."""
-    return build(kernel_source(_structure(model), settings.load, settings.solver, _codes()))
+    s = _structure(model)
+    key = repr((s, settings.load, settings.solver, compiler()))
+    if key not in _by_structure:
+        _by_structure[key] = build(kernel_source(s, settings.load, settings.solver, _codes()))
+    return _by_structure[key]
 
 
 def threads() -> int:
