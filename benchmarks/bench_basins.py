@@ -10,10 +10,11 @@ PID control and the switch-off time declared to the controller; scipy integrates
 go through the same classification rule (`basin_map`'s, written out in `classify` here, vmapped)
 into wells and a configuration code.
 
-gmr_jax is measured three ways in the same run: the default sweep ("joint" batching: each chunk
-of 256 points integrated as one ODE) sharded over all CPU cores (`gmr.use_cpu_cores()`), the
-same on one core, and the previous method (`batching="member"`: `vmap` of one `diffeqsolve` per
-point) on one core.
+gmr_jax is measured four ways in the same run: the default sweep (`batching="auto"`, which on a
+CPU is "native": the C kernel generated from the model, per-point step control) on every core and
+on one, the joint XLA sweep (`batching="joint"`: each chunk of 256 points integrated as one ODE)
+sharded over all CPU cores (`gmr.use_cpu_cores()`), and the oldest method (`batching="member"`:
+`vmap` of one `diffeqsolve` per point) on one core.
 
 Measured:
 - scipy on a random subset of the grid (per point, both methods), the classification agreement
@@ -29,6 +30,8 @@ Measured:
 import os
 
 os.environ["EQX_ON_ERROR"] = "nan"
+# a fresh cache folder: the native kernels' C compile is in the cold calls, as XLA's is
+os.environ["GMR_CACHE_DIR"] = __import__("tempfile").mkdtemp(prefix="gmr_bench_cache_")
 
 import argparse  # noqa: E402
 import platform  # noqa: E402
@@ -59,18 +62,13 @@ WELL = 0.03  # m: wells at x = ±WELL in every cell (k3 = -k1 / WELL^2)
 K1 = (8.0, 24.0)  # -k1 from the base cell to the tip cell, N/m
 F_RANGE = (0.1, 5.0)  # Hz
 A_RANGE = (0.02, 0.6)  # N
-SETTINGS = SweepSettings()  # settle_time 10 s, rtol 1e-6, atol 1e-8, x_tol 0.1, v_tol 0.05, joint
-CHUNK = None  # basin_map's default: default_chunk(dof) = 512, 256, 128 for 3, 5, 10 cells
+SETTINGS = SweepSettings()  # settle_time 10 s, rtol 1e-6, atol 1e-8, x_tol 0.1, v_tol 0.05, auto
+CHUNK = None  # basin_map's default (joint: 512, 256, 128 points for 3, 5, 10 cells; native: 16 lanes)
 CELLS = (3, 5, 10)
 SCALING_CELLS = 5
 FC = 2.0 / (3.0 * np.sqrt(3.0))  # static snap-through load = FC * |k1| * WELL
 METHODS = ("RK45", "DOP853")
 GRID_SHAPES = {100: (10, 10), 1000: (40, 25), 10_000: (100, 100), 100_000: (400, 250)}  # (nf, na)
-
-
-def default_chunk(n_dof: int) -> int:
-    """`basin_map`'s default points per chunk: a power of two near 1280 / dof, within [64, 512]."""
-    return int(np.clip(2 ** round(np.log2(1280 / max(n_dof, 1))), 64, 512))
 
 
 def classify(x1, v1, code, wells, span, settings: SweepSettings):
@@ -247,14 +245,15 @@ def scipy_compare(n, wells, bm, n_points, rng, gmr_rows):
 
 # -------------------------------------------------------------------------------------------
 # gmr_jax side
-def run_map(model, wells, n_points, chunk, shift=0.0, devices=None, batching="joint"):
-    """One `basin_map` call: (map, wall s, CPU s of this process, all threads)."""
+def run_map(model, wells, n_points, chunk, shift=0.0, devices=None, batching="auto"):
+    """One `basin_map` call: (map, wall s, CPU s of this process, all threads, its stats)."""
     f, a = grid(n_points, shift)
     settings = eqx_replace(SETTINGS, batching)
     t, c = time.perf_counter(), time.process_time()
-    bm = basin_map(model, f, a, wells, settings=settings, chunk=chunk, devices=devices).value
+    sol = basin_map(model, f, a, wells, settings=settings, chunk=chunk, devices=devices)
+    bm = sol.value
     jax.block_until_ready(bm)
-    return bm, time.perf_counter() - t, time.process_time() - c
+    return bm, time.perf_counter() - t, time.process_time() - c, sol.stats
 
 
 def eqx_replace(settings, batching):
@@ -263,8 +262,9 @@ def eqx_replace(settings, batching):
 
 
 MODES = {  # label: (devices, batching)
-    "all cores": (None, "joint"),
-    "1 core": ("one", "joint"),
+    "all cores": (None, "auto"),
+    "1 core": ("one", "auto"),
+    "all cores, joint": (None, "joint"),
     "1 core, member": ("one", "member"),
 }
 
@@ -273,15 +273,16 @@ def size_row(model, wells, n_points, chunk, label, mode="all cores"):
     """Cold call (compile + run), then a warm call on a shifted grid of the same size."""
     devs, batching = MODES[mode]
     devices = jax.devices()[:1] if devs == "one" else None
-    bm, t_cold, _ = run_map(model, wells, n_points, chunk, devices=devices, batching=batching)
+    bm, t_cold, _, _ = run_map(model, wells, n_points, chunk, devices=devices, batching=batching)
     mid = COMPILES.n
-    bm2, t_warm, cpu_warm = run_map(model, wells, n_points, chunk, shift=0.5, devices=devices, batching=batching)
+    bm2, t_warm, cpu_warm, stats = run_map(model, wells, n_points, chunk, shift=0.5, devices=devices,
+                                           batching=batching)
     recompiled = COMPILES.n - mid
     n = int(np.prod(bm.config.shape))
     cfg = np.asarray(bm2.config)
     st = np.asarray(bm2.steps)
-    chunk = default_chunk(model.n_dof) if chunk is None else chunk
-    row = {"label": label, "mode": mode, "n": n, "shape": f"{cfg.shape[0]} x {cfg.shape[1]}", "chunk": chunk,
+    chunk = stats["chunk"]
+    row = {"label": label, "mode": f"{mode} ({stats['batching']})", "n": n, "shape": f"{cfg.shape[0]} x {cfg.shape[1]}", "chunk": chunk,
            "cold": t_cold, "warm": t_warm, "compile": t_cold - t_warm, "per": t_warm / n,
            "cpu_per": cpu_warm / n, "tps": n / t_warm, "recompiled": recompiled, "steps": float(st.mean()),
            "n_cfg": len(np.unique(cfg[cfg >= 0])), "unsettled": float(np.mean(cfg < 0)),
@@ -318,7 +319,9 @@ def problem_text(map_size, n_scipy):
         f"{s.x_tol:g}·span and |v| < {s.v_tol:g}·span/s (span = {2 * WELL:g} m); configuration "
         "= bit i set when cell i ended in its second well, -1 when some cell has not settled.",
         "",
-        "gmr_jax: `basin_map` (Tsit5 + PID, switch-off time declared to the controller, points "
+        "gmr_jax: `basin_map` with its defaults (`batching=\"auto\"`: on a CPU the C kernel generated "
+        "from the model, Tsit5 with per-point step control, the switch-off time a stop its steps land on, "
+        "16 points per vector group, one thread per core), and the joint XLA sweep (points "
         "ordered by (f, A), chunks of `default_chunk(dof)` points (512, 256, 128 for 3, 5, 10 cells) each "
         "integrated as one ODE whose error norm is "
         "the largest member's RMS norm, so every member meets the tolerance it would meet alone; see "
@@ -357,8 +360,9 @@ def compare_tables(cmp_rows, disagreements):
     out += [
         "",
         "Ratio = scipy mean wall time per point / gmr_jax wall time per trajectory (warm call over the "
-        "whole grid). 'all cores': the default sweep sharded over every CPU core (`gmr.use_cpu_cores()`); "
-        "'1 core': the same on one device; '1 core, member': the earlier method (`batching=\"member\"`, "
+        "whole grid). 'all cores': the default sweep (native kernel) on every CPU core; '1 core': the same on "
+        "one thread; 'all cores, joint': the joint XLA sweep sharded over every core (`gmr.use_cpu_cores()`); "
+        "'1 core, member': the earliest method (`batching=\"member\"`, "
         "`vmap` of one `diffeqsolve` per point). CPU-time ratio: process CPU seconds on both sides (it charges "
         "gmr_jax for every core it used; scipy uses one).",
         "",
@@ -462,8 +466,7 @@ def main():
                 cell_rows[n, mode] = size_row(models[n], wells[n], map_size, CHUNK, f"{n} cells", mode)
 
     print("gmr_jax: chunk", flush=True)
-    chunk_rows = [size_row(m5, w5, map_size, c, lab5) for c in (128,)] + [base]  # base: 256
-    chunk_rows += [size_row(m5, w5, map_size, c, lab5) for c in (512,)]
+    chunk_rows = [size_row(m5, w5, map_size, c, lab5, "all cores, joint") for c in (128, 256, 512)]
 
     print("scipy", flush=True)
     rng = np.random.default_rng(args.seed)
@@ -488,12 +491,13 @@ def main():
     L += ["Summary: classification agreement with scipy "
           + ", ".join(f"{m} {agree[m]}/{tot}" for m in METHODS)
           + f"; per-point speed ratio vs scipy RK45 (scipy wall per point / gmr_jax wall per trajectory) for "
-          f"{', '.join(str(n) for n in CELLS)} cells: all cores {ratios['all cores']}; one core "
-          f"{ratios['1 core']}; earlier per-member vmap, one core {ratios['1 core, member']}. gmr_jax "
+          f"{', '.join(str(n) for n in CELLS)} cells: default (native) all cores {ratios['all cores']}; one core "
+          f"{ratios['1 core']}; joint XLA sweep, all cores {ratios['all cores, joint']}; earlier per-member "
+          f"vmap, one core {ratios['1 core, member']}. gmr_jax "
           f"throughput at {map_size:,} points (all cores): "
           + ", ".join(f"{r['tps']:.0f}" for r in head) + " trajectories/s; compile "
           f"{min(r['compile'] for r in head):.1f}-{max(r['compile'] for r in head):.1f}"
-          " s per grid size and configuration. Joint and per-member batching give the same "
+          " s per grid size and configuration. The default and per-member batching give the same "
           "configuration on " + ", ".join(f"{same[n]}/{map_size}" for n in CELLS) + " points.", ""]
     L += problem_text(map_size, n_scipy)
     L += compare_tables(cmp_rows, disagreements)
