@@ -81,9 +81,9 @@ def compiler() -> str | None:
 
 def supports(model, settings) -> bool:
     """Whether the native kernel integrates this model under these settings (float64, a
-    `GlobalModel` on a chain or independent DOFs)."""
+    `GlobalModel` on a chain or independent DOFs; every pair of `SweepSettings.solver`)."""
     return (isinstance(model, GlobalModel) and isinstance(model.topology, (Chain, Independent))
-            and settings.precision == "float64" and settings.solver in ("tsit5", "dopri5", "dopri8"))
+            and settings.precision == "float64")
 
 
 def _structure(model) -> dict:
@@ -133,12 +133,10 @@ def _field_lines(s: dict, load: str, t: str, y: str, out: str) -> list[str]:
             sg = (f"(FLAG(v{i} > 0.0) - FLAG(v{i} < 0.0))" if eps == 0.0 else f"tanh(v{i} / {_r(eps)})")
             lines.append(f"  double s{i} = {sg}, av{i} = fabs(v{i});")
             for j in s["bterms"][i]:
-                pw = " * ".join([f"av{i}"] * j) if j else ""
-                if j % 2 == 1 and eps == 0.0:
-                    pw = " * ".join([f"v{i}"] * j)
-                    terms.append(f"B[{i * s['nb'] + j}] * {pw}")
+                if j % 2 == 1 and eps == 0.0:  # sgn(v)|v|^j = v^j
+                    terms.append(f"B[{i * s['nb'] + j}] * " + " * ".join([f"v{i}"] * j))
                 else:
-                    terms.append(f"B[{i * s['nb'] + j}] * s{i}" + (f" * {pw}" if pw else ""))
+                    terms.append(f"B[{i * s['nb'] + j}] * s{i}" + "".join(f" * av{i}" for _ in range(j)))
         lines.append(f"  double f{i} = " + " + ".join(terms) + ";")
     tip = "p" if load == "tip" else "0.0"
     base = "p" if load == "base" else "0.0"

@@ -17,9 +17,10 @@ from jax.sharding import PartitionSpec as P
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._errors import GMRInputError, check_real, describe
-from .._model._model import AbstractMechanicalModel, GlobalModel
+from .._model._model import AbstractMechanicalModel
 from .._simulate._inputs import half_sine
 from .._simulate._integrate import Integrator, integrate, vector_field
+from .._simulate._simulate import has_coulomb
 from .._solution import RESULTS, Solution, as_result, code_name, raise_if_failed, value_of
 from . import _native
 from ._joint import joint_final_states
@@ -230,7 +231,7 @@ def friction_smoothing(model, settings: SweepSettings, wells) -> tuple:
     """(model, eps): the model with its sgn(v) as tanh(v / eps) where `settings.sign_eps` asks
     for it (see `SweepSettings`), and the eps in use (None: the model has no sgn(v) term or is
     not a `GlobalModel`; its own value where it set one)."""
-    if not isinstance(model, GlobalModel) or not np.any(np.asarray(model.velocity_damping)[:, 0] != 0.0):
+    if not has_coulomb(model):
         return model, None
     if model.sign_eps != 0.0 and settings.sign_eps is None:
         return model, float(model.sign_eps)

@@ -72,12 +72,14 @@ def simulate(
     if traced or not throw:  # inside jit/vmap/grad a failure can only be raised from inside
         return _simulate(model, inputs, ts, x0, v0, integrator, box=box, throw=throw)
     sol = _simulate(model, inputs, ts, x0, v0, integrator, box=box, throw=False)
+    if code_name(sol.result) == "successful":
+        return sol
     return raise_if_failed(sol, True, "simulate", _failure_hint(model, sol))
 
 
 def _failure_hint(model, sol) -> str:
     """What to do about a failed solve that the code's message alone does not say."""
-    if code_name(sol.result) != "successful" and exact_coulomb(model):
+    if exact_coulomb(model):
         return ("the model has Coulomb friction sgn(v) (velocity_damping order 0) with the exact sign: an "
                 "adaptive solver chatters where a mass stops (v = 0); integrate model.with_sign_eps(eps), "
                 "sgn(v) -> tanh(v / eps), with eps well below the speeds that matter (e.g. 1e-3 x the RMS "
@@ -86,12 +88,16 @@ def _failure_hint(model, sol) -> str:
     return "" if steps is None else f"{int(np.asarray(steps))} steps"
 
 
-def exact_coulomb(model) -> bool:
-    """Whether a `GlobalModel` has a sgn(v) term integrated with the exact (discontinuous) sign."""
+def has_coulomb(model) -> bool:
+    """Whether a `GlobalModel` has Coulomb friction, a sgn(v) term (`velocity_damping` order 0)."""
     from .._model._model import GlobalModel
 
-    return (isinstance(model, GlobalModel) and model.sign_eps == 0.0
-            and bool(np.any(np.asarray(model.velocity_damping)[:, 0] != 0.0)))
+    return isinstance(model, GlobalModel) and bool(np.any(np.asarray(model.velocity_damping)[:, 0] != 0.0))
+
+
+def exact_coulomb(model) -> bool:
+    """Whether a `GlobalModel` has a sgn(v) term integrated with the exact (discontinuous) sign."""
+    return has_coulomb(model) and model.sign_eps == 0.0
 
 
 def _check_inputs(model, inputs, ts, x0, v0, integrator, box):
