@@ -24,7 +24,7 @@ from .._recordings._recording import Recording, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
 from . import _noise, _resolution, _sanity, _shape_prior
-from ._degree import confine_borrowed, degree, least_risk_degree, odd_degree, redundancy
+from ._degree import averaged_parts, confine_borrowed, degree, least_risk_degree, mixture, odd_degree, redundancy
 from ._sanity import GMRDataWarning
 
 #: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
@@ -470,6 +470,14 @@ def _calibrated(coord: Solution, fits: LocalFit, library: Library, route: str, p
             return g, cov
         s, b, p, cov = add_discrepancy(g.stiffness, g.velocity_damping, g.position_damping, cov, fits, library)
         return GlobalCoefficients(jnp.asarray(s), jnp.asarray(b), jnp.asarray(p)), cov
+    parts = averaged_parts(coord, fits, library) if route == "gls" and "averaged_weight" in coord.stats else None
+    if parts is not None:  # a borrowed law averaged with a lower degree (`least_risk_degree`): each calibrated
+        (top, cap_t), (low, cap_l) = parts
+        cals = [calibrate_covariance(fits, library, np.asarray(sol.aux), method="gls", confining=confining,
+                                     max_degree=None if cap is None else jnp.asarray(int(cap)))
+                for sol, cap in ((top, cap_t), (low, cap_l))]
+        diff = np.asarray(low.value.flat(), float) - np.asarray(top.value.flat(), float)
+        return g, mixture(*cals, diff, float(coord.stats["averaged_weight"]))
     cap = coord.stats.get("max_degree_r")  # a borrowed law lowered to confine (`confine_borrowed`)
     cap = None if cap is None else jnp.asarray(int(cap))
     if route == "gls + joint damping":
