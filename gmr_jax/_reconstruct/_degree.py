@@ -177,9 +177,9 @@ def least_risk_degree(coord: Solution, fits: LocalFit, library: Library, energy:
         note = f"degree {k} instead of {top}"
     else:
         note = f"degree {top} averaged with degree {k} (weight {weight:.2f} on degree {k})"
-    return best, [f"{note}: its estimated rms error over the span is lower ({pct(best_risk)} against "
-                  f"{pct(top_risk)} of the force scale: the exact degree {top} passes the borrowed orders' "
-                  f"error on, amplified)"]
+    why = (f"{note}: its estimated rms error over the span is lower ({pct(best_risk)} against {pct(top_risk)} "
+           f"of the force scale: the exact degree {top} passes the borrowed orders' error on, amplified)")
+    return best, [why]
 
 
 def average(top: Solution, low: Solution, weight: float) -> Solution:
