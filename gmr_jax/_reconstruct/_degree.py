@@ -128,9 +128,11 @@ def least_risk_degree(coord: Solution, fits: LocalFit, library: Library, energy:
     The lower degree k is the GLS projection of the chosen law K onto degree k, so over the span
     E[(F_k - F_K)^2] = bias_k^2 + var F_K - var F_k, bias_k^2 + var F_k (its risk) is estimated
     without bias by (F_k - F_K)^2 - var F_K + 2 var F_k (Mallows' C_p on the law's values) and
-    F_K's risk is var F_K; cov(F_k, F_K) = var F_k. The average (1 - w) F_K + w F_k has the
-    estimated risk (1 - w)^2 var F_K + 2 w (1 - w) var F_k + w^2 C_p(k), least at
-    w = (var F_K - var F_k) / mean (F_k - F_K)^2, clipped to [0, 1] (within `MIN_WEIGHT` of 0 or 1: one law). Picking the least C_p instead
+    F_K's risk is var F_K; cov(F_k, F_K) = var F_k (the identity of nested GLS laws; the
+    coordination's weights make it smaller, see `average`). The average (1 - w) F_K + w F_k has
+    the estimated risk (1 - w)^2 var F_K + 2 w (1 - w) var F_k + w^2 C_p(k), least at
+    w = (var F_K - var F_k) / mean (F_k - F_K)^2, clipped to [0, 1] (within `MIN_WEIGHT` of 0 or
+    1: one law). Picking the least C_p instead
     decides by chance where two estimates lie within their noise (seed 4 cell 4: nonic 0.93 %,
     septic 0.98 % of the force scale, standard error 4.4e-3). Candidates and the average must be
     admissible as `confine_borrowed` demands (`admissible`); an inadmissible average gives the
@@ -167,8 +169,8 @@ def least_risk_degree(coord: Solution, fits: LocalFit, library: Library, energy:
         best, best_risk = (low, low_risk) if weight > 0.5 else (coord, top_risk)
     else:
         best = average(coord, low, weight)
-        best_risk = (1 - weight) ** 2 * top_risk + 2 * weight * (1 - weight) * float(np.mean(low_curve[1])) \
-            + weight**2 * low_risk
+        best_risk = ((1 - weight) ** 2 * top_risk + 2 * weight * (1 - weight) * float(np.mean(low_curve[1]))
+                     + weight**2 * low_risk)
         if not admissible(best.value.stiffness, eq, energy):  # the least-C_p law instead
             best, best_risk = (low, low_risk) if low_risk < top_risk else (coord, top_risk)
     if best is coord:
@@ -188,8 +190,9 @@ def average(top: Solution, low: Solution, weight: float) -> Solution:
     (1 - w)^2 C_top + (1 - (1 - w)^2) C_low + w (1 - w) d d', d the difference of their
     coefficients (the spread between the two laws, a discrepancy of the degree choice). It takes
     cov(low, top) = C_low, the identity of nested GLS laws; with the coordination's weights the
-    cross-covariance is smaller (0.42 C_low in `test_the_average_of_two_nested_laws_has_the_mixture_covariance`),
-    so the mixture bounds the average's covariance from above."""
+    cross-covariance is smaller (0.42 C_low in the test
+    `test_the_average_of_two_nested_laws_has_the_mixture_covariance`), so the mixture bounds the
+    average's covariance from above."""
     w = float(weight)
     value = jax.tree.map(lambda a, b: (1 - w) * np.asarray(a) + w * np.asarray(b), top.value, low.value)
     diff = np.asarray(low.value.flat(), float) - np.asarray(top.value.flat(), float)
