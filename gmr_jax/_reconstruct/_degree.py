@@ -195,15 +195,16 @@ def average(top: Solution, low: Solution, weight: float) -> Solution:
     average's covariance from above."""
     w = float(weight)
     value = jax.tree.map(lambda a, b: (1 - w) * np.asarray(a) + w * np.asarray(b), top.value, low.value)
-    diff = np.asarray(low.value.flat(), float) - np.asarray(top.value.flat(), float)
-    aux = mixture(np.asarray(top.aux, float), np.asarray(low.aux, float), diff, w)
     stats = dict(top.stats) | {"averaged_weight": w, "averaged_degree": int(low.stats["K_r"])}
-    return Solution(value=value, result=top.result, stats=stats, aux=aux)
+    return Solution(value=value, result=top.result, stats=stats, aux=mixture(top, low, w))
 
 
-def mixture(c_top: np.ndarray, c_low: np.ndarray, diff: np.ndarray, weight: float) -> np.ndarray:
-    """The covariance of `average`'s law from its parts' (propagated or calibrated)."""
+def mixture(top: Solution, low: Solution, weight: float, covariances=None) -> np.ndarray:
+    """The covariance of `average`'s law from its parts' `covariances` (C_top, C_low): their
+    propagated ones (`aux`, the default) or calibrated ones."""
     w = float(weight)
+    c_top, c_low = (np.asarray(c, float) for c in (covariances or (top.aux, low.aux)))
+    diff = np.asarray(low.value.flat(), float) - np.asarray(top.value.flat(), float)
     return (1 - w) ** 2 * c_top + (1 - (1 - w) ** 2) * c_low + w * (1 - w) * np.outer(diff, diff)
 
 

@@ -470,16 +470,15 @@ def _calibrated(coord: Solution, fits: LocalFit, library: Library, route: str, p
             return g, cov
         s, b, p, cov = add_discrepancy(g.stiffness, g.velocity_damping, g.position_damping, cov, fits, library)
         return GlobalCoefficients(jnp.asarray(s), jnp.asarray(b), jnp.asarray(p)), cov
+    def bound(cap):  # a borrowed law lowered to confine (`confine_borrowed`) or to average with
+        return None if cap is None else jnp.asarray(int(cap))
+
     parts = averaged_parts(coord, fits, library) if route == "gls" and "averaged_weight" in coord.stats else None
     if parts is not None:  # a borrowed law averaged with a lower degree (`least_risk_degree`): each calibrated
-        (top, cap_t), (low, cap_l) = parts
         cals = [calibrate_covariance(fits, library, np.asarray(sol.aux), method="gls", confining=confining,
-                                     max_degree=None if cap is None else jnp.asarray(int(cap)))
-                for sol, cap in ((top, cap_t), (low, cap_l))]
-        diff = np.asarray(low.value.flat(), float) - np.asarray(top.value.flat(), float)
-        return g, mixture(*cals, diff, float(coord.stats["averaged_weight"]))
-    cap = coord.stats.get("max_degree_r")  # a borrowed law lowered to confine (`confine_borrowed`)
-    cap = None if cap is None else jnp.asarray(int(cap))
+                                     max_degree=bound(cap)) for sol, cap in parts]
+        return g, mixture(parts[0][0], parts[1][0], float(coord.stats["averaged_weight"]), cals)
+    cap = bound(coord.stats.get("max_degree_r"))
     if route == "gls + joint damping":
         return g, calibrate_covariance(fits, library, cov, method="gls", damping=False, confining=confining,
                                        max_degree=cap)
