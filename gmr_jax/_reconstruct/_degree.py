@@ -128,8 +128,8 @@ def least_risk_degree(coord: Solution, fits: LocalFit, library: Library, energy:
     The lower degree k is the GLS projection of the chosen law K onto degree k, so over the span
     E[(F_k - F_K)^2] = bias_k^2 + var F_K - var F_k, bias_k^2 + var F_k (its risk) is estimated
     without bias by (F_k - F_K)^2 - var F_K + 2 var F_k (Mallows' C_p on the law's values) and
-    F_K's risk is var F_K; cov(F_k, F_K) = var F_k (the identity of nested GLS laws; the
-    coordination's weights make it smaller, see `average`). The average (1 - w) F_K + w F_k has
+    F_K's risk is var F_K; cov(F_k, F_K) = var F_k (the identity of nested GLS laws, exact: the
+    weights are the conditions' inverse covariance). The average (1 - w) F_K + w F_k has
     the estimated risk (1 - w)^2 var F_K + 2 w (1 - w) var F_k + w^2 C_p(k), least at
     w = (var F_K - var F_k) / mean (F_k - F_K)^2, clipped to [0, 1] (within `MIN_WEIGHT` of 0 or
     1: one law). Picking the least C_p instead
@@ -189,10 +189,9 @@ def average(top: Solution, low: Solution, weight: float) -> Solution:
     mixture covariance of the two nested GLS laws
     (1 - w)^2 C_top + (1 - (1 - w)^2) C_low + w (1 - w) d d', d the difference of their
     coefficients (the spread between the two laws, a discrepancy of the degree choice). It takes
-    cov(low, top) = C_low, the identity of nested GLS laws; with the coordination's weights the
-    cross-covariance is smaller (0.42 C_low in the test
-    `test_the_average_of_two_nested_laws_has_the_mixture_covariance`), so the mixture bounds the
-    average's covariance from above."""
+    cov(low, top) = C_low, the identity of nested GLS laws, which holds exactly for a fixed degree
+    (`test_the_average_of_two_nested_laws_has_the_mixture_covariance` checks it from the laws'
+    Jacobians), so the propagated part is the average's covariance."""
     w = float(weight)
     value = jax.tree.map(lambda a, b: (1 - w) * np.asarray(a) + w * np.asarray(b), top.value, low.value)
     stats = dict(top.stats) | {"averaged_weight": w, "averaged_degree": int(low.stats["K_r"])}
