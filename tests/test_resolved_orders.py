@@ -13,6 +13,7 @@ import gmr_jax as g
 from gmr_jax._fit._library import STIFFNESS
 from gmr_jax._reconstruct._degree import average, least_risk_degree, span_curve
 from gmr_jax._reconstruct._reconstruct import (
+    _calibrated,
     _extend_restoring,
     _Failure,
     _fit_wells,
@@ -304,6 +305,33 @@ def test_the_average_of_two_nested_laws_has_the_mixture_covariance():
         avgs.append(f)
     ratio = np.var(np.asarray(avgs), axis=0, ddof=1) / predicted
     assert 0.85 < np.median(ratio) < 1.15 and np.all((ratio > 0.7) & (ratio < 1.3)), ratio
+
+
+def test_an_averaged_law_keeps_its_band_when_the_joint_regression_refits_the_damping():
+    # "gls + joint damping" (the paper's restoring law, the damping refitted jointly): an averaged
+    # restoring law keeps the calibrated mixture of its two laws as its block, the joint damping's block
+    # stays as the regression gave it. (Before, the mixture was recalibrated as if it were the top law.)
+    lib = g.Library(5, 1)
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        fits, _ = _noisy_high_orders(0.05, 0.05, rng.standard_normal((2, 5)), lib)
+        top = jax.device_get(g.coordinate(fits, lib, method="gls", confining=True))
+        best, _ = least_risk_degree(top, fits, lib, 10.0)
+        if "averaged_weight" in best.stats:
+            break
+    else:
+        pytest.fail("no draw averaged two laws")
+    ns = np.asarray(best.value.stiffness).shape[0]
+    _, alone = _calibrated(best, fits, lib, "gls", True, confining=True)
+    damping = np.diag([3.0, 5.0])  # a stand-in for the joint regression's damping block
+    joint_aux = np.zeros((ns + 2, ns + 2))
+    joint_aux[:ns, :ns], joint_aux[ns:, ns:] = np.asarray(best.aux)[:ns, :ns], damping
+    value = g.GlobalCoefficients(best.value.stiffness, jnp.zeros(2), jnp.zeros(1))
+    joint = g.Solution(value=value, result=best.result, stats=dict(best.stats), aux=jnp.asarray(joint_aux))
+    _, cov = _calibrated(joint, fits, lib, "gls + joint damping", True, confining=True)
+    np.testing.assert_allclose(cov[:ns, :ns], alone[:ns, :ns], rtol=1e-12)
+    np.testing.assert_allclose(cov[ns:, ns:], damping)
+    assert not np.allclose(alone[:ns, :ns], np.asarray(best.aux)[:ns, :ns])  # calibration changed the block
 
 
 @pytest.mark.parametrize("c, rel4", [(0.05, 0.02), (0.02, 0.05)])

@@ -473,11 +473,19 @@ def _calibrated(coord: Solution, fits: LocalFit, library: Library, route: str, p
     def bound(cap):  # a borrowed law lowered to confine (`confine_borrowed`) or to average with
         return None if cap is None else jnp.asarray(int(cap))
 
-    parts = averaged_parts(coord, fits, library) if route == "gls" and "averaged_weight" in coord.stats else None
+    averaged = route in ("gls", "gls + joint damping") and "averaged_weight" in coord.stats
+    parts = averaged_parts(coord, fits, library) if averaged else None
     if parts is not None:  # a borrowed law averaged with a lower degree (`least_risk_degree`): each calibrated
         cals = [calibrate_covariance(fits, library, np.asarray(sol.aux), method="gls", confining=confining,
                                      max_degree=bound(cap)) for sol, cap in parts]
-        return g, mixture(parts[0][0], parts[1][0], float(coord.stats["averaged_weight"]), cals)
+        mixed = mixture(parts[0][0], parts[1][0], float(coord.stats["averaged_weight"]), cals)
+        if route == "gls":
+            return g, mixed
+        # the joint damping's block as the joint regression gave it (as for a law not averaged)
+        ns = np.asarray(g.stiffness).shape[0]
+        cov = np.array(cov, float)
+        cov[:ns, :ns] = mixed[:ns, :ns]
+        return g, cov
     cap = bound(coord.stats.get("max_degree_r"))
     if route == "gls + joint damping":
         return g, calibrate_covariance(fits, library, cov, method="gls", damping=False, confining=confining,
@@ -737,7 +745,7 @@ def reconstruct(
         keep = low_order_terms(library, keep_restoring_order) if keep_low_orders else None
         noise = [_noise.well_noise(recs, grp, i, masses, topology) if structured_noise else None
                  for grp in groups]  # None: a measured, or OLS asked for
-        say(f"{f'DOF {i + 1}/{d}: ' if d > 1 else ''}local fits at {len(groups)} wells")
+        say(f"{f'DOF {i} ({i + 1}/{d}): ' if d > 1 else ''}local fits at {len(groups)} wells")
         sols = jax.device_get(_fit_wells(xs, vs, ys, w, library, solver, select, keep, noise))  # NumPy from here
         fits: LocalFit = sols.value
         if screen_sigma is not None:
@@ -767,7 +775,7 @@ def reconstruct(
         borrowed, design_why = [], None
         if plan[i] is not None:
             fits, borrowed = _borrow(fits, plan[i], xs, vs, ys, w, library)
-        say(f"{f'DOF {i + 1}/{d}: ' if d > 1 else ''}coordination ({coordination})")
+        say(f"{f'DOF {i} ({i + 1}/{d}): ' if d > 1 else ''}coordination ({coordination})")
         coord, route, why, paper_sound, confining, found = _coordinate_dof(
             fits, xs, vs, ys, w, library, coordination, float(masses[i]), i, odd_only=any(borrowed))
         if any(borrowed) and route == "joint":
