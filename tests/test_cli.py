@@ -29,6 +29,21 @@ def joint_files(tmp_path_factory):
     return paths
 
 
+def test_fit_masses_scale_the_forces(joint_files, tmp_path, capsys):
+    # --masses: the inertial force m a is the regression's target, so every coefficient scales with m
+    # (against the unit-mass fit of the same files); a bad list is refused by name
+    one, two = tmp_path / "one.json", tmp_path / "two.json"
+    assert main(["fit", *joint_files, "--out", str(one), "--no-figure"]) == 0
+    capsys.readouterr()
+    assert main(["fit", *joint_files, "--out", str(two), "--no-figure", "--masses", "2"]) == 0
+    assert "taken as 1" not in capsys.readouterr().out
+    m1, m2 = g.load_model(one), g.load_model(two)
+    np.testing.assert_allclose(np.asarray(m2.masses), [2.0])
+    np.testing.assert_allclose(np.asarray(m2.stiffness), 2 * np.asarray(m1.stiffness), rtol=1e-6, atol=1e-9)
+    r = run(["fit", *joint_files, "--out", str(tmp_path / "bad.json"), "--masses", "1,x"])
+    assert r.returncode == 2 and "--masses must be comma-separated numbers" in r.stderr and "Traceback" not in r.stderr
+
+
 def test_fit_hand_made_csv(joint_files, tmp_path, capsys):
     out = tmp_path / "model.json"
     assert main(["fit", *joint_files, "--out", str(out)]) == 0
@@ -37,6 +52,7 @@ def test_fit_hand_made_csv(joint_files, tmp_path, capsys):
     np.testing.assert_allclose([k[1], k[3]], [-2244, 1755], rtol=0.03)
     printed = capsys.readouterr().out
     assert "estimated from x" in printed and "F_0(x, v)" in printed
+    assert "no masses in the recordings and no --masses: each taken as 1" in printed  # said, not silent
     # the stored standard errors are printed, term by term, and agree with the file
     assert "std. error" in printed
     assert "What each well's data resolved" in printed and "resolution" in json.loads(out.read_text())

@@ -142,6 +142,43 @@ def test_4_free_decay_without_input_is_fine(joint):
         assert _sanity.check_missing_input("decay", rec, has_input=False) == []
 
 
+@pytest.mark.parametrize("name", ["joint", "arch", "magnet", "kresling3"])
+def test_13_consistent_units_are_silent(name):
+    """Rule 13 stays silent on the built-in systems' own columns at 30 dB (every column of x, v, a
+    measured; the NES end to end in `test_clean_builtin_data_give_no_warning`)."""
+    s = {"joint": g.systems.bistable_joint, "arch": g.systems.shallow_arch, "magnet": g.systems.magnetic_bistable,
+         "kresling3": g.systems.kresling3}[name]()
+    amp = {"joint": np.deg2rad(1.0), "kresling3": 3e-4}.get(name, 0.05)
+    topo = g.Chain() if s.truth.n_dof > 1 else g.Independent()
+    for r in g.systems.make_recordings(s, amp, snr_db=30.0, seed=0, duration=DURATION):
+        assert _sanity.check_units(r.name, r, topo) == []
+
+
+def test_13_columns_in_other_units_are_reported(nes):
+    """A time column in ms, accelerations in g, x in mm, a velocity of the opposite sign: each is
+    reported with its factor (checked against the scale applied), and reconstruct emits it."""
+    _, recs = nes
+    r = recs[0]
+    topo = g.Independent()
+    cases = {
+        "t in ms": (dataclasses.replace(r, t=r.t * 1e3), {"v": 1e3, "a": 1e6}),
+        "a in g": (dataclasses.replace(r, a=r.a / 9.80665, base_acc=r.base_acc / 9.80665), {"a": 1 / 9.80665}),
+        "x in mm": (dataclasses.replace(r, x=r.x * 1e3), {"v": 1e-3, "a": 1e-3}),
+        "v reversed": (dataclasses.replace(r, v=-r.v), {"v": -1.0}),
+    }
+    for label, (rec, want) in cases.items():
+        msgs = _sanity.check_units("nes_S1", rec, topo)
+        got = {("v" if "velocity" in m else "a"): float(m.split(" is ")[1].split(" times")[0]) for m in msgs}
+        assert set(got) == set(want), (label, msgs)
+        for key, factor in want.items():
+            assert got[key] == pytest.approx(factor, rel=0.03), (label, key, got[key])
+    assert "as with t in ms or x in mm" in _sanity.check_units("nes_S1", cases["t in ms"][0], topo)[0]
+    assert "accelerations in g" in _sanity.check_units("nes_S1", cases["a in g"][0], topo)[0]
+    assert "opposite sign" in _sanity.check_units("nes_S1", cases["v reversed"][0], topo)[0]
+    _, msgs = _fit([cases["a in g"][0], *recs[1:]])
+    assert _has(msgs, "nes_S1: the measured relative acceleration", "accelerations in g")
+
+
 def test_5_different_masses_are_refused(nes):
     _, recs = nes
     heavier = dataclasses.replace(recs[1], masses=recs[1].masses * 1.5)

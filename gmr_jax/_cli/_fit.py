@@ -158,6 +158,9 @@ def run(args) -> int:
         print(str(st["resolution"]))
     if any(r.v is None or r.a is None for r in recs):
         print("  note: velocities/accelerations were estimated from x (Savitzky-Golay, see README)")
+    if masses is None and all(r.masses is None for r in recs):
+        print("  note: no masses in the recordings and no --masses: each taken as 1, so every coefficient is a force "
+              "per unit mass (pass --masses M0,M1,... for forces in the recordings' units)")
     if png is not None:
         stage(f"writing the figure {png} (and .pdf)")
         from ..plots._fit import fit_figure

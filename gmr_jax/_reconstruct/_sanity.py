@@ -207,6 +207,86 @@ def check_missing_input(name: str, x, has_input: bool) -> list[str]:
     return []
 
 
+#: Rule 13: a measured v or a and the matching derivative of x (both through one Savitzky-Golay
+#: filter) agree in scale within this factor, or are reported, where they correlate at least
+#: `UNITS_MIN_CORR` (below it the noise hides the scale: no verdict).
+UNITS_FACTOR, UNITS_MIN_CORR = 1.25, 0.9
+
+
+def _scale_hint(s: float) -> str:
+    k = np.log10(abs(s)) / 3.0
+    g = np.log(abs(s)) / np.log(9.80665)
+    hints = []
+    if s < 0:
+        hints.append("opposite sign")
+    if abs(k - round(k)) < 0.05 and round(k) != 0:
+        hints.append("a power of 1000, as with t in ms or x in mm where the others are in s and m")
+    elif abs(g - round(g)) < 0.05 and round(g) != 0:
+        hints.append("a power of g = 9.81, as with accelerations in g where x and t are in m and s")
+    return "; ".join(hints)
+
+
+def check_units(name: str, rec, topology) -> list[str]:
+    """Rule 13: the measured velocities and accelerations are the derivatives of the measured x
+    in the same units. Per DOF, x' (x'') by Savitzky-Golay differentiation and the measured v (the
+    relative acceleration from a: a minus the base acceleration, per cell for a chain), smoothed by
+    the same filter (the window `auto_window` picks for x), are compared by the two least-squares
+    scales <d, m>/<d, d> and <m, m>/<d, m>, which bracket the true one when both carry noise; a
+    record whose scale lies outside `UNITS_FACTOR` (1.25) both ways, or is negative, at a
+    correlation of at least `UNITS_MIN_CORR` (0.9), is reported with the factor (a time column in
+    ms, x in mm, a in g: the fit would take the columns as consistent and put the factor into
+    the damping or the restoring force). Skipped: a signal derived or integrated from another, and
+    the accelerations of a record without an input column (its base acceleration is unknown).
+    Built-in systems (both joints, NES, arch, magnet, 3- and 5-cell Kresling chains; 30 and 60 dB,
+    seeds 0-1; 108 columns of v and of a): the noise sits in the derivative of x, so the first
+    scale is attenuated and the second is not: v at correlation >= 0.93, scales 0.86-1.002; a at
+    correlation >= 0.9 (101 columns), 0.81-1.006. A time column in ms gives 1e6 for a, 1e3 for v."""
+    from .._recordings._derivatives import auto_window, differentiate
+
+    x = np.asarray(rec.x, float)
+    info = rec.integration or {}
+    dt = float(rec.dt)
+    windows = [auto_window(c, dt) if np.ptp(c) > 0 else None for c in x.T]
+    pairs = []
+    if rec.v is not None and "v" not in rec.derived and info.get("from") != "v":
+        pairs.append(("v", 1, np.asarray(rec.v, float)))
+    has_input = rec.base_acc is not None or rec.force is not None
+    if rec.a is not None and "a" not in rec.derived and info.get("from") != "a" and has_input:
+        b = np.zeros(x.shape[0]) if rec.base_acc is None else np.asarray(rec.base_acc, float)
+        rel = np.asarray(rec.a, float) - b[:, None]
+        if topology.name == "chain":
+            rel = np.diff(rel, axis=1, prepend=0.0)  # cell i: a_i - a_(i-1), the cell's x_i''
+        pairs.append(("a", 2, rel))
+    out = []
+    for key, order, meas in pairs:
+        for i, w in enumerate(windows):
+            if w is None or w > x.shape[0]:
+                continue
+            d = differentiate(x[:, i], dt, order, w)
+            m = differentiate(meas[:, i], dt, 0, w)
+            dd, dm, mm = float(d @ d), float(d @ m), float(m @ m)
+            if dd <= 0 or mm <= 0:
+                continue
+            r = dm / np.sqrt(dd * mm)
+            if abs(r) < UNITS_MIN_CORR:
+                continue
+            lo, hi = sorted((dm / dd, mm / dm), key=abs)
+            if r > 0 and not (abs(lo) > UNITS_FACTOR or abs(hi) < 1 / UNITS_FACTOR):
+                continue  # the bracket reaches the band about 1
+            s = float(np.sign(r) * np.sqrt(abs(lo * hi)))
+            what = "velocity" if key == "v" else "relative acceleration (a minus the base's)"
+            deriv = "first" if order == 1 else "second"
+            hint = _scale_hint(s)
+            out.append(
+                f"{name}: the measured {what} of DOF {i} is {s:.4g} times the {deriv} derivative of its x "
+                f"(correlation {abs(r):.3f}{'; ' + hint if hint else ''}): the columns' units or signs disagree, "
+                f"and the fit takes them as consistent (the factor goes into the "
+                f"{'damping' if key == 'v' else 'restoring and damping'} forces): fix the scale of t, x or {key} "
+                f"(e.g. --columns '{key}=COLUMN*FACTOR')"
+            )
+    return out
+
+
 def check_swings(dof: int, names, xs, labels, equilibria, stiffness) -> tuple[list[str], set]:
     """Rule 2: a recording should stay in its well. It is reported as swinging between wells
     when (a) its range (0.1-99.9 percentiles) covers the equilibrium of another well, or (b)
