@@ -320,6 +320,28 @@ def test_acceleration_only_chain_becomes_cell_deformations(rng):
     np.testing.assert_allclose(chain.complete("chain").x, chain.x)
 
 
+def test_csv_separated_by_semicolons_or_tabs(tmp_path):
+    """A spreadsheet's CSV in a locale with decimal commas (';' between columns, ',' in numbers) and a
+    tab-separated one read as the comma-separated file; a bad cell is still named by line and column."""
+    t = np.arange(0.0, 1.0, 1e-3)
+    x, b = 0.1 * np.sin(5 * t) - 1.0, np.cos(3 * t)
+    rows = np.column_stack([t, x, b])
+    np.savetxt(tmp_path / "comma.csv", rows, delimiter=",", header="t,x0,base_acc", comments="", fmt="%.12g")
+    (tmp_path / "semi.csv").write_text("t;x0;base_acc\n" + "\n".join(
+        ";".join(f"{v:.12g}".replace(".", ",") for v in r) for r in rows))
+    np.savetxt(tmp_path / "tab.csv", rows, delimiter="\t", header="t\tx0\tbase_acc", comments="", fmt="%.12g")
+    ref = g.load_recording(tmp_path / "comma.csv")
+    for name in ("semi.csv", "tab.csv"):
+        r = g.load_recording(tmp_path / name)
+        for k in ("t", "x", "base_acc"):
+            np.testing.assert_array_equal(getattr(r, k), getattr(ref, k))
+    lines = (tmp_path / "semi.csv").read_text().splitlines()
+    lines[5] = lines[5].split(";")[0] + ";oops;1"
+    (tmp_path / "bad.csv").write_text("\n".join(lines))
+    with pytest.raises(g.GMRInputError, match=r"line 6 \(sample 4\), column 'x0': 'oops' is not a number"):
+        g.load_recording(tmp_path / "bad.csv")
+
+
 def test_one_dof_csv_with_plain_column_names(tmp_path):
     """A one-DOF lab CSV headed t, x, v, force (the NPZ keys) reads as t, x0, v0, f0; naming a
     column twice (x and x0) is refused with a message that says why."""

@@ -398,7 +398,13 @@ def _read_csv(path: Path, src: str, raw: bool = False):
     lines = text.splitlines()
     if not lines or not lines[0].strip():
         raise GMRInputError(f"{src}: the first line must be the header row naming the columns (t, x0, ...)")
-    header = [h.strip() for h in next(csv.reader([lines[0]]))]
+    # the separator: ',' (the contract), or ';' / a tab as spreadsheets in many locales write them,
+    # where a ',' inside a number is its decimal mark ("0,5;1,25")
+    delim = next((d for d in (",", ";", "\t") if d in lines[0]), ",")
+    decimal_comma = delim != "," and any("," in r for r in lines[1:50])
+    if decimal_comma:
+        lines = [lines[0]] + [r.replace(",", ".") for r in lines[1:]]
+    header = [h.strip() for h in next(csv.reader([lines[0]], delimiter=delim))]
     expected = ("t, x0.. (one per DOF; or v0.. or a0.. alone), optional v0.., a0.., f0.., base_acc "
                 "(one DOF: x, v, a, f or force also read as x0, v0, a0, f0)")
     if not raw:  # the names a one-DOF lab file uses (and the NPZ keys): x, v, a, force
@@ -423,14 +429,14 @@ def _read_csv(path: Path, src: str, raw: bool = False):
         raise GMRInputError(f"{src}: the header is there but no data rows follow")
     ncol = len(header)
     try:  # fast path; on any failure the scan below names the row and column
-        data = np.loadtxt(io.StringIO("\n".join(r for _, r in rows)), delimiter=",", comments=None, ndmin=2)
+        data = np.loadtxt(io.StringIO("\n".join(r for _, r in rows)), delimiter=delim, comments=None, ndmin=2)
         ok = data.shape == (len(rows), ncol)
     except ValueError:
         ok = False
     for j, (line_no, line) in enumerate([] if ok else rows):
         if j == 0:
             data = np.empty((len(rows), ncol))
-        cells = line.split(",")
+        cells = line.split(delim)
         if len(cells) != ncol:
             raise GMRInputError(f"{src}: line {line_no} (sample {j}) has {len(cells)} cells, the header has "
                                 f"{ncol} columns; every row needs one value per column")
