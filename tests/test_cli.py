@@ -148,11 +148,35 @@ def test_basins_cli(tmp_path, capsys):
     n_bad = int(np.sum(z2["config"] < 0))
     assert n_bad > 0 and f"-1 (not classified): {n_bad} not settled" in printed
     assert np.all(z2["result"][z2["config"] < 0] == g.RESULTS.not_settled._value)
+    # ... and what settle time the model needs (its slowest linearised decay); with it every point settles
+    advice = next(line for line in printed.splitlines() if "points not settled" in line)
+    need = float(advice.rsplit("--settle-time ", 1)[1])
+    assert 0.01 < need < 100, advice
+    out4 = tmp_path / "b4"
+    assert main(["basins", str(tmp_path / "m.json"), "--f", "0.5:4:3", "--A", "0.3:2.5:2", "--settle-time",
+                 str(need), "--out", str(out4)]) == 0
+    assert np.all(np.load(out4 / "basins.npz")["config"] >= 0) and "points not settled" not in capsys.readouterr().out
     # --x-range still overrides, and the same wells come out
     out3 = tmp_path / "b3"
     assert main(["basins", str(tmp_path / "m.json"), "--f", "0.5:4:3", "--A", "0.3:2.5:2", "--x-range=-0.05:0.05",
                  "--out", str(out3)]) == 0
     np.testing.assert_allclose(np.load(out3 / "basins.npz")["wells"], z["wells"])
+
+
+def test_settle_advice_is_the_decay_time_of_the_slowest_mode():
+    # one DOF, m x'' + c x' - k1 x + k3 x^3 = 0: about a well the decay rate is c / (2 m) (underdamped),
+    # so the advice is 7 / (c / 2m) = 14 m / c; an undamped model is told no settle time will do
+    from gmr_jax._cli._basins import _settle_advice
+
+    m, c = 2.0, 0.1
+    terms = [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -1.0},
+             {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 1.0},
+             {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": c}]
+    wells = np.array([[-1.0, 1.0]])
+    said = _settle_advice(g.from_terms([m], terms), wells, 10.0)
+    assert f"decays at {c / (2 * m):.3g} 1/s" in said and f"--settle-time {14 * m / c:g}" in said, said
+    said = _settle_advice(g.from_terms([m], terms[:2]), wells, 10.0)
+    assert "does not decay" in said and "no settle time will do" in said, said
 
 
 @pytest.mark.slow

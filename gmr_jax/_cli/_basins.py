@@ -61,6 +61,43 @@ def _compile_seconds() -> float:
     return _COMPILE["seconds"] + BUILD_SECONDS[0]
 
 
+def _settle_advice(model, wells, settle_time: float, max_configs: int = 64) -> str:
+    """What to pass where points had not settled: the slowest decay rate sigma of the model's free
+    motion about its stable configurations (each DOF at one of its wells; the eigenvalues of the
+    linearised equations of motion, at most `max_configs` configurations), and the settle time
+    7 / sigma in which that mode decays a thousandfold."""
+    import itertools
+
+    import jax
+    import jax.numpy as jnp
+
+    d = model.n_dof
+    per_dof = [w[~np.isnan(w)] for w in np.asarray(wells, float)]
+
+    def field(state):
+        x, v = state[:d], state[d:]
+        return jnp.concatenate([v, model.accelerations(x, v, 0.0, jnp.zeros(d))])
+
+    jac = jax.jit(jax.jacfwd(field))
+    rates, scale = [], 0.0
+    for conf in itertools.islice(itertools.product(*per_dof), max_configs):
+        state = jnp.concatenate([jnp.asarray(conf, float), jnp.zeros(d)])
+        ev = np.linalg.eigvals(np.asarray(jac(state)))
+        rates.append(float(np.min(-ev.real)))
+        scale = max(scale, float(np.max(np.abs(ev))))
+    sigma = min(rates) if rates else float("nan")
+    if not np.isfinite(sigma):
+        return f"points not settled: lengthen --settle-time (now {settle_time:g} s)"
+    if sigma <= 1e-9 * scale:  # rounding of a purely imaginary pair
+        return (f"points not settled: the model's free motion about a configuration of its wells does not decay "
+                f"(slowest linearised decay rate {sigma:.3g} 1/s: no damping there), so no settle time will do; "
+                f"check its damping terms")
+    need = 7.0 / sigma
+    return (f"points not settled: the model's slowest free vibration about its wells decays at {sigma:.3g} 1/s "
+            f"(time constant {1 / sigma:.3g} s), so it needs about {need:.3g} s to settle "
+            f"(now {settle_time:g} s): rerun with --settle-time {float(f'{need:.2g}'):g}")
+
+
 def run(args) -> int:
     import gmr_jax as gmr
 
@@ -110,6 +147,8 @@ def run(args) -> int:
         codes, cc = np.unique(cat["result"][bad], return_counts=True)
         why = ", ".join(f"{c} {code_name(k).replace('_', ' ')}" for k, c in zip(codes, cc))
         print(f"  -1 (not classified): {why}")
+        if np.any(cat["result"][bad] == gmr.RESULTS.not_settled._value):
+            print(f"  {_settle_advice(model, wells, args.settle_time)}")
     comp = _compile_seconds() - compiled_before
     if sol.stats.get("sign_eps"):
         print(f"  Coulomb friction sgn(v) integrated as tanh(v / {sol.stats['sign_eps']:.3g}): exact above a tenth "
