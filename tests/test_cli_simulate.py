@@ -53,3 +53,55 @@ def test_simulate_diverged_is_exit_1_not_a_number(case, capsys):
     assert doc["result"] == "diverged" and "nrmse" not in doc
     with pytest.raises(g.GMRComputationError, match="diverged"):
         g.free_run(g.load_model(d / "bad.json"), d / "rec.npz")
+
+
+def test_crossings_count_passages_halfway_from_the_saddle_to_the_other_well():
+    # wells at -1 and +1, saddle 0: a crossing needs x past +-0.5; noise about the saddle is none
+    from gmr_jax._simulate._free_run import crossings
+
+    model = g.from_terms([1.0], [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -1.0},
+                                 {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 1.0}])
+    path = np.concatenate([np.full(50, -1.0), np.linspace(-1, 0.4, 20), 0.1 * np.sin(np.arange(40)),  # no
+                           np.linspace(0, 1, 20), np.full(30, 1.0), np.linspace(1, -1, 30),  # two
+                           np.linspace(-1, 1.1, 30)])[:, None]  # three
+    assert crossings(model, path, None).tolist() == [3]
+    assert crossings(model, path, path[::-1]).tolist() == [3]
+    assert crossings(model, path, np.full_like(path, np.nan)).tolist() == [-1]
+    one_well = g.from_terms([1.0], [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": 1.0}])
+    assert crossings(one_well, path, None).tolist() == [-1]
+
+
+def test_short_runs_judge_a_model_on_a_cross_well_record_a_free_run_leaves(tmp_path, capsys):
+    # a double well driven across its saddle, recorded with 60 dB noise. The truth's free run follows
+    # the record (it did not before the input smoothing kept the drive: 4.5 % off over one period);
+    # a model 1 % off in its cubic stiffness leaves it (sensitive dependence), while runs of one drive
+    # period from the recorded state stay within a few percent
+    def double_well(k3):
+        return g.from_terms([1.0], [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -2.0},
+                                    {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": k3},
+                                    {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.05}])
+
+    ts = np.arange(0, 60, 0.01)
+    drive = g.BaseSine(0.5, 0.25)
+    x, v = (np.asarray(a) for a in g.simulate(double_well(1.5), drive, ts, np.array([-np.sqrt(2 / 1.5)])).value)
+    rng = np.random.default_rng(0)
+    noisy = lambda s: s + np.std(s) * 1e-3 * rng.standard_normal(s.shape)  # noqa: E731
+    b = np.asarray([drive(t)[0] for t in ts])
+    rec = g.Recording(t=ts, x=noisy(x), v=noisy(v), base_acc=b, name="cross")
+    exact = g.free_run(double_well(1.5), rec).value
+    assert exact.horizon == pytest.approx(4.0, rel=0.05)
+    assert exact.nrmse[0] < 0.05 and exact.horizon_nrmse[0] < 0.01, (exact.nrmse, exact.horizon_nrmse)
+    hops = int(exact.crossings[0, 0])
+    # independent: sign changes of the noise-free truth (also counting an excursion past the saddle that
+    # turns back before halfway, which the hysteresis does not)
+    sign = np.sign(x[:, 0])
+    assert hops > 10 and 0 <= int(np.sum(sign[1:] != sign[:-1])) - hops <= 2 and exact.crossings[1, 0] == hops
+    off = g.free_run(double_well(1.515), rec).value
+    assert off.nrmse[0] > 0.3 and off.horizon_nrmse[0] < 0.05, (off.nrmse, off.horizon_nrmse)
+    g.save_recording(rec, tmp_path / "cross.npz")
+    g.save_model(double_well(1.515), tmp_path / "m.json")
+    assert main(["simulate", str(tmp_path / "m.json"), str(tmp_path / "cross.npz"), "--out", str(tmp_path / "o")]) == 0
+    printed = capsys.readouterr().out
+    doc = json.loads((tmp_path / "o" / "simulate.json").read_text())
+    assert doc["horizon_nrmse"][0] == pytest.approx(off.horizon_nrmse[0]) and doc["crossings"]["measured"] == [hops]
+    assert "crosses between wells" in printed and "runs of 4 s from the recorded state" in printed

@@ -29,6 +29,23 @@ def register(sub):
     return s
 
 
+def _horizon_lines(fr) -> list[str]:
+    """The horizon runs and crossings of a free run, in words (printed and in simulate.md)."""
+    if fr.horizon is None:
+        return []
+    out = [f"  runs of {fr.horizon:.3g} s from the recorded state (the dominant period): NRMSE "
+           + ", ".join(f"DOF {i} {100 * e:.3g} %" for i, e in enumerate(fr.horizon_nrmse))]
+    both = [(i, int(a), int(b)) for i, (a, b) in enumerate(fr.crossings.T) if a >= 0]
+    if both:
+        out.append("  well-to-well crossings over the record, measured / free run: "
+                   + ", ".join(f"DOF {i} {a} / {'-' if b < 0 else b}" for i, a, b in both))
+        if any(a > 0 for _, a, _ in both) and np.nanmax(fr.nrmse) > 0.3:
+            out.append("  (the record crosses between wells: such motion can be chaotic, and a free run then leaves "
+                       "the record even with an exact model; the short runs judge the model, the crossing counts only "
+                       "over a record long enough to hold many)")
+    return out
+
+
 def run(args) -> int:
     import gmr_jax as gmr
     from gmr_jax.plots import free_run_figure
@@ -52,6 +69,13 @@ def run(args) -> int:
     total = float(np.sqrt(np.sum(fr.residual**2) / np.sum((xm - xm.mean(0)) ** 2)))
     doc.update(nrmse=[float(e) for e in fr.nrmse], nrmse_total=total,
                definition="||x_model - x|| / ||x - mean(x)|| over the run, per DOF")
+    if fr.horizon is not None:  # extensions: short runs from the recorded state, well-to-well crossings
+        doc.update(horizon_s=fr.horizon, horizon_nrmse=[float(e) for e in fr.horizon_nrmse],
+                   horizon_definition="the model restarted from the recorded state every horizon_s and run for "
+                                      "horizon_s; NRMSE as above, pooled over the restarts",
+                   crossings={"measured": [int(c) for c in fr.crossings[0]],
+                              "model": [int(c) for c in fr.crossings[1]]})
+    lines = _horizon_lines(fr)
     stage(f"writing {out}")
     free_run_figure(fr, out / "simulate.png", x_unit=args.x_unit,
                     title=f"{args.model} on {rec.name}: free run under the recorded input")
@@ -59,7 +83,8 @@ def run(args) -> int:
     md = [f"# gmr simulate: {args.model} on {args.recording}", "",
           "Free run under the recorded input from the recorded state; NRMSE = ||x_model - x|| / ||x - mean(x)||.", "",
           "| DOF | NRMSE |", "|---|---|"] + [f"| {i} | {100 * e:.4g} % |" for i, e in enumerate(fr.nrmse)]
-    md += [f"| all | {100 * total:.4g} % |", "", *[f"- {n}" for n in fr.notes], "",
+    md += [f"| all | {100 * total:.4g} % |", "", *[f"- {line.strip()}" for line in lines],
+           *[f"- {n}" for n in fr.notes], "",
            "![free run](simulate.png)", ""]
     (out / "simulate.md").write_text("\n".join(md))
     print(f"gmr simulate: free run of {args.model} on {rec.name} ({fr.t.size} samples from sample {fr.start})")
@@ -67,6 +92,8 @@ def run(args) -> int:
         print(f"  DOF {i}: NRMSE {100 * e:.4g} %")
     if model.n_dof > 1:
         print(f"  all DOFs: NRMSE {100 * total:.4g} %")
+    for line in lines:
+        print(line)
     print(f"wrote {out}/simulate.png, simulate.pdf, simulate.json, simulate.md")
     stage("done")
     return 0

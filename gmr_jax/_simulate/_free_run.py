@@ -37,6 +37,13 @@ class FreeRun:
     - `nrmse` (dof,): ||x - x_measured|| / ||x_measured - mean|| per DOF (NaN when failed).
     - `start`: index of the first sample in the recording; `name`: the recording's name.
     - `notes`: how the input and x were treated (for reports).
+    - `horizon`, `horizon_nrmse` (dof,): the model restarted from the recorded state every
+      `horizon` seconds (one period of the input, or of x for a free decay) and run for that long,
+      its error pooled over the restarts, as `nrmse` (`horizon_runs`). A record that crosses
+      between wells can be chaotic: a free run leaves it even with an exact model, a run of one
+      period does not. None where x was integrated from v or a.
+    - `crossings` (2, dof): well-to-well crossings of the measured x and of the free run (`crossings`;
+      -1 for a DOF with fewer than two of the model's wells in the recorded range).
     """
 
     t: Float[np.ndarray, " n"]
@@ -46,6 +53,9 @@ class FreeRun:
     start: int
     name: str
     notes: tuple[str, ...] = ()
+    horizon: float | None = None
+    horizon_nrmse: Float[np.ndarray, " dof"] | None = None
+    crossings: Float[np.ndarray, "2 dof"] | None = None
 
     @property
     def residual(self) -> Float[np.ndarray, "n dof"]:
@@ -108,9 +118,83 @@ def free_run(model: AbstractMechanicalModel, recording, *, columns: dict | None 
         x, xm = comparable(rec, x), comparable(rec, xm)
     nrmse = (np.sqrt(np.sum((x - xm) ** 2, 0) / np.sum((xm - xm.mean(0)) ** 2, 0)) if ok
              else np.full(model.n_dof, np.nan))
+    horizon, h_nrmse, crossed = None, None, None
+    if "x" not in rec.derived:
+        horizon, h_nrmse, failed = horizon_runs(m, inp, rec, k, integrator, box)
+        if failed:
+            notes.append(f"{failed} of the runs over {horizon:.3g} s failed or diverged (left out of the horizon NRMSE)")
+        crossed = np.array([crossings(model, xm, None), crossings(model, xm, x if ok else None)])
     run = FreeRun(t=np.asarray(rec.t[k:]), x=x if ok else np.full_like(xm, np.nan), x_measured=xm,
-                  nrmse=nrmse, start=k, name=rec.name, notes=tuple(notes))
+                  nrmse=nrmse, start=k, name=rec.name, notes=tuple(notes), horizon=horizon, horizon_nrmse=h_nrmse,
+                  crossings=crossed)
     what = f"free run of the model on {rec.name}"
     stats = {"result": code_name(result), "message": "" if ok else f"{what}: {message(result)} [{code_name(result)}]",
              "steps": sol.stats.get("num_steps") if isinstance(sol.stats, dict) else None}
     return raise_if_failed(Solution(value=run, result=result, stats=stats), throw, what)
+
+
+def horizon_runs(model, inp, rec: Recording, start: int, integrator: Integrator, box):
+    """The model restarted from the recorded state (x, v) every `horizon` seconds from sample
+    `start` on and run for `horizon` under the same input (vmapped): `(horizon, nrmse (dof,),
+    failed)`, the NRMSE pooled over the runs that succeeded, normalised as `free_run`'s. The
+    horizon is the dominant period of the input (of x for a free decay), at least 20 samples and
+    at most a quarter of the record."""
+    import jax
+
+    from .._recordings._derivatives import dominant_period
+
+    b, f = rec.inputs()
+    drive = np.column_stack([b, f])
+    sig = drive[:, np.argmax(np.ptp(drive, 0))] if np.ptp(drive) > 0 else rec.x[start:, 0]
+    n_total = rec.n_samples - start
+    steps = int(round(dominant_period(sig, rec.dt) / rec.dt))
+    steps = int(np.clip(steps, 20, max(n_total // 4, 2)))
+    firsts = np.arange(start, rec.n_samples - steps, steps)
+    local = jnp.arange(steps + 1) * rec.dt
+
+    def one(t0, x0, v0):
+        sol = simulate(model, inp, t0 + local, x0, v0, integrator=integrator, box=box, throw=False)
+        return sol.value[0], sol.result._value
+
+    xs, codes = jax.vmap(one)(jnp.asarray(rec.t[firsts]), jnp.asarray(rec.x[firsts]), jnp.asarray(rec.v[firsts]))
+    xs, codes = np.asarray(xs), np.asarray(codes)
+    good = (codes == RESULTS.successful._value) & np.all(np.isfinite(xs), axis=(1, 2))
+    measured = np.stack([rec.x[i:i + steps + 1] for i in firsts])
+    xm = rec.x[start:]
+    denom = np.sum((xm - xm.mean(0)) ** 2, 0) / xm.shape[0]
+    if not np.any(good):
+        return steps * rec.dt, np.full(rec.n_dof, np.nan), int(firsts.size)
+    err = np.mean((xs[good] - measured[good]) ** 2, axis=(0, 1))
+    return steps * rec.dt, np.sqrt(err / denom), int(np.sum(~good))
+
+
+def crossings(model, x_measured, x) -> np.ndarray:
+    """Per DOF, the well-to-well crossings of `x` (n, dof) (of `x_measured` where `x` is None; -1
+    where `x` is NaN or the model has fewer than two stable wells within the recorded range widened
+    by a quarter of it): a crossing is counted when x passes halfway from the saddle to the
+    neighbouring well (hysteresis: noise about a saddle is not a crossing)."""
+    from ..metrics._metrics import equilibria
+
+    xm = np.asarray(x_measured, float)
+    sig = xm if x is None else np.asarray(x, float)
+    out = np.full(xm.shape[1], -1)
+    if not np.all(np.isfinite(sig)):
+        return out
+    for i in range(xm.shape[1]):
+        lo, hi = float(xm[:, i].min()), float(xm[:, i].max())
+        pad = 0.25 * (hi - lo)
+        roots = equilibria(model, i, (lo - pad, hi + pad))
+        wells = [r for r, stable in roots if stable]
+        if len(wells) < 2:
+            continue
+        saddles = [next((r for r, st in roots if not st and a < r < b), 0.5 * (a + b)) for a, b in zip(wells, wells[1:])]
+        up = [0.5 * (sd + w) for sd, w in zip(saddles, wells[1:])]  # from well j to j + 1
+        down = [0.5 * (sd + w) for sd, w in zip(saddles, wells[:-1])]  # from well j + 1 to j
+        state, n = int(np.argmin(np.abs(np.asarray(wells) - sig[0, i]))), 0
+        for v in sig[:, i]:
+            while state < len(up) and v > up[state]:
+                state, n = state + 1, n + 1
+            while state > 0 and v < down[state - 1]:
+                state, n = state - 1, n + 1
+        out[i] = n
+    return out
