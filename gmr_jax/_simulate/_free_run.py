@@ -2,7 +2,7 @@
 (the output error of `gmr discover`, per DOF, as one public call).
 
 The run starts from the recorded state at `sim_start` (half a Savitzky-Golay window in when v
-was estimated from x), the input is low-passed at 1.5x its band edge and interpolated by a
+was estimated from x), the input is low-passed at 3x its band edge and interpolated by a
 cubic spline (`_discover.smooth_input`, `sampled_spline`), sgn(v) terms are smoothed to
 tanh(v / eps) with eps = 1e-3 rms(v), and the step budget grows with the record: the same
 simulation `discover` reports as output error. An x integrated from v or a is compared after the
@@ -89,7 +89,7 @@ def free_run(model: AbstractMechanicalModel, recording, *, columns: dict | None 
     if rec.n_dof != model.n_dof:
         raise GMRInputError(f"free_run: {rec.name} has {rec.n_dof} DOF(s), the model {model.n_dof}")
     rec = rec.complete(model.topology.name)
-    notes = ["input low-passed at 1.5x its band edge, cubic-spline interpolated"]
+    notes = ["input low-passed at 3x its band edge, cubic-spline interpolated"]
     if not rec.equilibrium_observed:
         rec = place(model, [rec])[0][0]
         notes.append("x integrated from the recording's " + rec.integration["from"] +
