@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Float
+from jaxtyping import Float, Int
 
 from .._errors import GMRInputError
 from .._model._model import AbstractMechanicalModel
@@ -55,7 +55,7 @@ class FreeRun:
     notes: tuple[str, ...] = ()
     horizon: float | None = None
     horizon_nrmse: Float[np.ndarray, " dof"] | None = None
-    crossings: Float[np.ndarray, "2 dof"] | None = None
+    crossings: Int[np.ndarray, "2 dof"] | None = None
 
     @property
     def residual(self) -> Float[np.ndarray, "n dof"]:
