@@ -19,7 +19,13 @@ def free_run_figure(run, path=None, *, x_unit: str = "recording units", title: s
         ax.plot(run.t, run.x[:, i], color="tab:red", lw=0.9, ls="--", label="model (free run)")
         ax.set_ylabel(f"$x_{{{i}}}$ ({x_unit})")
         ax.legend(loc="upper right", fontsize=8, ncols=2)
-        ax.set_title(f"DOF {i}: NRMSE {100 * run.nrmse[i]:.3g} %", fontsize=10, loc="left")
+        extra = ""
+        if run.horizon_nrmse is not None:
+            extra = f"; runs of {run.horizon:.3g} s from the recorded state: {100 * run.horizon_nrmse[i]:.3g} %"
+            if run.crossings is not None and run.crossings[0, i] >= 0:
+                model = "-" if run.crossings[1, i] < 0 else int(run.crossings[1, i])
+                extra += f"; well crossings {int(run.crossings[0, i])} measured, {model} free run"
+        ax.set_title(f"DOF {i}: free-run NRMSE {100 * run.nrmse[i]:.3g} %{extra}", fontsize=10, loc="left")
         ax.grid(alpha=0.3)
         ar.plot(run.t, run.residual[:, i], color="tab:blue", lw=0.8)
         ar.axhline(0.0, color="0.5", lw=0.6)
