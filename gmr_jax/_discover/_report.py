@@ -52,6 +52,11 @@ def summary(report) -> str:
                      f"content below {_range(cuts)} Hz removed as drift; the equilibrium offset "
                      + ("was given" if all(integ[n]["equilibrium"] == "given" for n in names) else
                         "is unobservable and was placed by each model's force balance"))
+    if b["kind"] == "output" and "horizon_nrmse" in b and "horizon_nrmse" in a:
+        lines.append(f"  the {b['on']} crosses between wells ({b['crossings_measured']} crossings; the free runs: "
+                     f"{b['crossings_model']} before, {a['crossings_model']} after): a free run can leave such a "
+                     f"record even with an exact model; runs of {b['horizon_s']:.3g} s from the recorded state: "
+                     f"NRMSE {100 * b['horizon_nrmse']:.3g} % -> {100 * a['horizon_nrmse']:.3g} %")
     if b["kind"] == "equation" and b.get("why_not_output"):
         lines.append(f"  error measure: equation (force) error, not simulation (output) error: {b['why_not_output']}")
     for w in report.warnings:
