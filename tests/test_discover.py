@@ -241,7 +241,7 @@ def test_a_holdout_that_crosses_wells_is_judged_by_short_runs():
     def record(drive, x0, name):
         x, v = (np.asarray(a) for a in gmr_jax.simulate(truth, drive, ts, np.array([x0])).value)
         b = np.asarray([drive(t)[0] for t in ts])
-        noisy = lambda s: s + np.std(s) * 1e-3 * rng.standard_normal(s.shape)  # noqa: E731
+        noisy = lambda s: s + np.std(s) * 1e-3 * rng.standard_normal(s.shape)
         return gmr_jax.Recording(t=ts, x=noisy(x), v=noisy(v), base_acc=b, name=name)
 
     chirp = gmr_jax.BaseChirp(0.002, 0.1, 2.0, 40.0)
