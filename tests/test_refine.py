@@ -244,3 +244,66 @@ def test_force_driven_recording_without_base_acc():
     assert sol.result == g.RESULTS.successful
     np.testing.assert_allclose(np.asarray(sol.value.stiffness)[:, 1], [40.0, 60.0], rtol=1e-3)
     assert output_error(sol.value, [rec]).value.nrmse < 1e-3 < output_error(start, [rec]).value.nrmse
+
+
+def test_a_refinement_worse_on_the_holdout_is_warned():
+    # the rule: the holdout's windowed output NRMSE up by more than 5 %, or more failed windows
+    from gmr_jax._refine._refine import _holdout_warnings
+    from gmr_jax._refine._shooting import OutputError
+
+    def pair(b, a, fb=0, fa=0):
+        return {"before": OutputError(b, fb, 59), "after": OutputError(a, fa, 59)}
+
+    assert _holdout_warnings(None) == [] and _holdout_warnings(pair(0.002, 0.00209)) == []
+    assert "0.002 -> 0.004982" in _holdout_warnings(pair(0.002, 0.004982))[0]
+    assert "failed windows 0 -> 2 of 59" in _holdout_warnings(pair(0.002, 0.002, 0, 2))[0]
+
+
+@pytest.mark.slow
+def test_refining_on_single_well_records_can_spoil_the_global_law(tmp_path, capsys):
+    """A non-polynomial double well (F = -2x + 1.5x^3 + 0.3 tanh(3x) x^2) fitted by `gmr fit` from one
+    chirp record per well, then refined on the same records with a cross-well holdout: the refinement
+    moves the global law away from the truth between the wells (restoring error against the truth,
+    NumPy) and the holdout says so: `refine` warns and `gmr refine` prints it."""
+    from scipy.integrate import solve_ivp
+
+    from gmr_jax._cli._main import main
+
+    def force(x):
+        return -2.0 * x + 1.5 * x**3 + 0.3 * np.tanh(3 * x) * x**2
+
+    t = np.arange(0, 60, 0.005)
+    rng = np.random.default_rng(7)
+    wells = [-1.059339364943238, 1.059339364943238]
+
+    def noisy(s, db=50.0):
+        return s + np.std(s) / 10 ** (db / 20) * rng.standard_normal(s.size)
+
+    def record(acc, x0, name, with_a=True):
+        sol = solve_ivp(lambda tt, y: [y[1], -force(y[0]) - 0.05 * y[1] - acc(tt)], (0, t[-1]), [x0, 0.0],
+                        t_eval=t, rtol=1e-10, atol=1e-12, method="DOP853")
+        x, v = sol.y
+        cols, head = [t, noisy(x)], "t,x0"
+        if with_a:  # the absolute acceleration, as an accelerometer gives it
+            cols, head = cols + [noisy(-force(x) - 0.05 * v)], head + ",a0"
+        np.savetxt(tmp_path / f"{name}.csv", np.column_stack(cols + [noisy(acc(t))]), delimiter=",",
+                   header=head + ",base_acc", comments="")
+        return str(tmp_path / f"{name}.csv")
+
+    def chirp(tt):
+        return 0.02 * np.sin(2 * np.pi * (0.2 * tt + 2.8 / 120 * tt**2))
+
+    recs = [record(chirp, w, f"well{k}") for k, w in enumerate(wells)]
+    hold = record(lambda tt: 0.5 * np.sin(2 * np.pi * 0.25 * tt), wells[0], "cross", with_a=False)
+    assert main(["fit", *recs, "--out", str(tmp_path / "m.json"), "--no-figure", "--no-progress"]) == 0
+    with pytest.warns(g.GMRDataWarning, match="worse than the given one on the holdout"):
+        sol = g.refine(g.load_model(tmp_path / "m.json"), [g.load_recording(r) for r in recs],
+                       holdout=[g.load_recording(hold)])
+    xs = np.linspace(wells[0] - 0.2, wells[1] + 0.2, 201)
+    err = {k: np.linalg.norm(np.polynomial.polynomial.polyval(xs, np.asarray(m.stiffness)[0]) - force(xs))
+           / np.linalg.norm(force(xs)) for k, m in (("fit", g.load_model(tmp_path / "m.json")), ("refined", sol.value))}
+    assert err["refined"] > 1.5 * err["fit"], err
+    capsys.readouterr()
+    assert main(["refine", str(tmp_path / "m.json"), *recs, "--holdout", hold, "--out", str(tmp_path / "r.json"),
+                 "--no-progress"]) == 0
+    assert "gmr refine: warning: the refined model is worse" in capsys.readouterr().out

@@ -1,5 +1,7 @@
 """`gmr refine MODEL.json REC.npz [...] --out REFINED.json`: output-error refinement of a model."""
 
+import warnings
+
 import numpy as np
 
 from .._errors import GMRInputError
@@ -49,13 +51,15 @@ def run(args) -> int:
     settings = gmr.RefineSettings(window=args.window, solver=solver, max_iterations=args.max_iterations,
                                   stride=args.stride, max_windows=args.max_windows)
     stage("refining: multiple-shooting least squares (compiles the windowed solves first)")
-    sol = gmr.refine(model, train, free=args.free, settings=settings, holdout=hold, throw=False)
+    with warnings.catch_warnings():  # printed below as `warning:` lines
+        warnings.simplefilter("ignore", gmr.GMRDataWarning)
+        sol = gmr.refine(model, train, free=args.free, settings=settings, holdout=hold, throw=False)
     st = sol.stats
     ok = sol.result == RESULTS.successful
     report = {"train": {k: v.as_dict() for k, v in st["train"].items()},
               "holdout": None if st["holdout"] is None else {k: v.as_dict() for k, v in st["holdout"].items()},
               "iterations": st["iterations"], "result": "successful" if ok else RESULTS[sol.result],
-              "free": [list(t) for t in st["free"]]}
+              "free": [list(t) for t in st["free"]], "warnings": list(st["warnings"])}
     print(f"gmr refine: {len(st['free'])} free coefficient(s), {st['windows']} window(s) of {args.window} s, "
           f"{st['iterations']} iteration(s)")
     for name in ("train", "holdout"):
@@ -63,6 +67,8 @@ def run(args) -> int:
         if e is not None:
             print(f"  {name} NRMSE: {e['before'].nrmse:.4g} -> {e['after'].nrmse:.4g} "
                   f"(failed windows {e['before'].failed} -> {e['after'].failed} of {e['after'].windows})")
+    for w in st["warnings"]:
+        print(f"gmr refine: warning: {w}")
     if sol.result == RESULTS.nonlinear_max_steps_reached:
         ok = True  # still an improved model: write it, but say so
         print(f"gmr refine: warning: the solver used all {args.max_iterations} iterations without meeting its "
