@@ -140,3 +140,24 @@ def test_samples_history_lowers_the_peak_and_is_verified():
     assert act.peak < sol.stats["half_sine"]["peak"]  # never worse than the half-sine it starts from
     sim = g.simulate(MODEL, act.inputs(2), jnp.array([0.0, act.t[-1] + 30.0]), jnp.asarray(WELLS[:, 0]))
     np.testing.assert_allclose(np.asarray(sim.value[0][-1]), [1.0, 1.0], atol=0.1)
+
+
+@pytest.mark.slow
+def test_cli_actuate_takes_a_one_dof_independent_model(tmp_path):
+    """`gmr fit` on single-DOF records writes an 'independent' model; its one mass is the tip."""
+    from gmr_jax._cli._main import main
+
+    one = g.from_terms([1.0], [
+        {"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -2.0},
+        {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 2.0},
+        {"dof": 0, "physics": "position_damping", "order": 0, "coefficient": 0.3},
+        {"dof": 0, "physics": "velocity_damping", "order": 2, "coefficient": 0.1},
+    ], topology="independent")
+    path = tmp_path / "one.json"
+    g.save_model(one, path)
+    out = tmp_path / "act"
+    rc = main(["actuate", str(path), "--target", "1", "--out", str(out), "--f-range", "0.05:1",
+               "--A-range", "0.1:3", "--settle-time", "30", "--grid", "6", "--seeds", "2", "--sign-eps", "0.01"])
+    assert rc == 0
+    res = json.loads((out / "actuation.json").read_text())
+    assert res["reached"] is True and res["final_config"] == "1"

@@ -36,6 +36,8 @@ def files() -> dict:
              "terms": [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": 100.0},
                        {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.5}]}
     (d / "indep.json").write_text(json.dumps(indep))
+    indep2 = {**indep, "masses": [1.0, 1.0], "terms": indep["terms"] + [{**t, "dof": 1} for t in indep["terms"]]}
+    (d / "indep2.json").write_text(json.dumps(indep2))
     # a linear spring-mass under a base sine: a valid recording for discover/refine/fit
     t = np.arange(2000) * 1e-3
     x = 1e-3 * np.sin(2 * np.pi * 3 * t)
@@ -123,8 +125,11 @@ CASES = [
      r"cannot write there"),
     ("basins: --out missing", lambda: B + [F("chain"), *GRID], 2, r"the following arguments are required: --out"),
     # actuate
-    ("actuate: independent model", lambda: ["actuate", F("indep"), "--target", "1", "--out", OUT()], 2,
-     r"needs a chain model"),
+    ("actuate: independent model of two DOFs", lambda: ["actuate", F("indep2"), "--target", "1-1", "--out", OUT()],
+     2, r"needs a chain model .* 2 independent DOFs has no tip"),
+    # one mass is its own tip: taken, then refused for its single well
+    ("actuate: one-DOF model with one well", lambda: ["actuate", F("indep"), "--target", "1", "--out", OUT()], 2,
+     r"fewer than two stable wells"),
     ("actuate: target malformed", lambda: ["actuate", F("chain"), "--target", "x-y", "--out", OUT()], 2, r"target"),
     ("actuate: target wrong length", lambda: ["actuate", F("chain"), "--target", "1-1-1", "--out", OUT()], 2,
      r"target"),

@@ -42,8 +42,14 @@ def run(args):
     out = output_dir(args.out)
     stage("loading the model, finding its wells")
     model = gmr.load_model(args.model)
+    if model.topology.name != "chain" and model.n_dof == 1:
+        # one mass: m a + F = force either way, and the tip is that mass
+        import dataclasses
+
+        model = dataclasses.replace(model, topology=gmr.Chain())
     if model.topology.name != "chain":
-        raise GMRInputError("gmr actuate needs a chain model (topology 'chain'): the load is a tip force")
+        raise GMRInputError("gmr actuate needs a chain model (topology 'chain'): the load is a tip force; a model "
+                            f"of {model.n_dof} independent DOFs has no tip")
     wells, how = find_wells(model, args.x_range, args.model)
     if wells.shape[1] < 2 or np.any(np.isnan(wells[:, :2])):
         few = [i for i in range(model.n_dof) if np.sum(~np.isnan(wells[i])) < 2]
