@@ -34,6 +34,9 @@ def register(sub):
                    help="chains: each cell alone (by default, cells of one design lend the restoring orders their "
                    "local fits resolve to the weakly excited cells, as a prior on those cells' own fits; the model "
                    "file's shared_design says who lent what)")
+    f.add_argument("--no-eiv", action="store_true",
+                   help="plain least squares in the local fits (by default, where x is measured with the "
+                   "accelerations, they are corrected for the noise on x: errors in variables)")
     f.add_argument("--restoring-order", "-r", type=positive_int, default=5)
     f.add_argument("--damping-order", "-d", type=positive_int, default=5)
     f.add_argument("--threshold", default="auto", help="STLS threshold on normalised coefficients, or 'auto' "
@@ -52,6 +55,19 @@ def register(sub):
                    "its warnings are still written); without it warnings are printed and the status is 0")
     f.set_defaults(fn=run)
     return f
+
+
+def format_eiv(stats: dict) -> list[str]:
+    """One line per DOF whose local fits were corrected for the noise on x (errors in variables)."""
+    lines = []
+    for i, rep in enumerate(stats.get("dofs", [])):
+        wells = [w for w in (rep.stats.get("errors_in_variables") or []) if w and w["applied"]]
+        if wells:
+            rel = [100 * w["of_vibration"] for w in wells]
+            lines.append(f"  DOF {i}: local fits corrected for the noise on x (errors in variables; its sd "
+                         f"{min(rel):.2g}-{max(rel):.2g} % of the vibration at {len(wells)} well(s); --no-eiv: "
+                         "plain least squares)")
+    return lines
 
 
 def data_range(recs):
@@ -123,6 +139,8 @@ def run(args) -> int:
         kwargs["coordination"] = args.coordination
         if args.no_shared_design:
             kwargs["shared_design"] = False
+        if args.no_eiv:
+            kwargs["errors_in_variables"] = False
         kwargs["progress"] = lambda msg: stage(f"gmr: {msg}")
     stage(f"{args.method}: local fits and coordination (the first run of a shape compiles)")
     with warnings.catch_warnings():  # printed below as `warning:` lines, once each
@@ -156,6 +174,8 @@ def run(args) -> int:
     if "resolution" in st:
         print("What each well's data resolved (and the excitation that would resolve what they did not):")
         print(str(st["resolution"]))
+    for line in format_eiv(st):
+        print(line)
     if any(r.v is None or r.a is None for r in recs):
         print("  note: velocities/accelerations were estimated from x (Savitzky-Golay, see README)")
     if masses is None and all(r.masses is None for r in recs):

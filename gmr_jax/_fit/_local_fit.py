@@ -9,7 +9,8 @@ from jaxtyping import Array, Bool, Float
 from .._solution import RESULTS, Solution, error_if_failed
 from .._trace_cache import disk_traced
 from ._library import STIFFNESS, Library
-from ._stls import STLS, compress, coefficient_covariance, stls_qr
+from ._errors_in_variables import corrected_qr
+from ._stls import STLS, compress, coefficient_covariance, residual_sum_of_squares, stls_qr
 from ._target_noise import TargetNoise, structured_covariance
 from ._threshold import default_thresholds, select_threshold
 
@@ -49,6 +50,7 @@ def fit_local(
     keep: Bool[Array, " terms"] | None = None,
     support: Bool[Array, " terms"] | None = None,
     noise: TargetNoise | None = None,
+    x_noise: Float[Array, ""] | None = None,
     throw: bool = True,
 ) -> Solution:
     """Fit the local model of one equilibrium (Algorithm 1, steps 1.1-1.4).
@@ -62,7 +64,10 @@ def fit_local(
     library); it bounds `keep` too (with `select`, the threshold is still chosen on the whole
     library). `noise`: the target's noise where it holds a differentiated signal; the
     covariance is then the sandwich with that noise's structure (`structured_covariance`; its
-    residual-to-noise ratio in `stats["noise_ratio"]`), not sigma² (Θ'Θ)^-1.
+    residual-to-noise ratio in `stats["noise_ratio"]`), not sigma² (Θ'Θ)^-1. `x_noise`: the
+    variance of white noise on the measured x; the regression is then corrected for it (errors in
+    variables, `_errors_in_variables`: the corrected score; `stats["eiv_applied"]` says whether it
+    could be), while the covariance and `rss` stay those of the recorded samples.
 
     **Returns:** a `Solution` whose value is a `LocalFit`.
     """
@@ -77,13 +82,18 @@ def fit_local(
     else:
         cv = {}
     qr = compress(theta, y, weights)
-    sol = stls_qr(qr, solver, initial_mask=support)
+    extra = {}
+    fit_qr = qr
+    if x_noise is not None:
+        fit_qr, extra["eiv_applied"] = corrected_qr(qr, x - xe, v, y, w, library, jnp.asarray(x_noise, float))
+    sol = stls_qr(fit_qr, solver, initial_mask=support)
     if keep is not None:
         refit = eqx.tree_at(lambda s: (s.threshold, s.alpha), solver, (jnp.zeros(()), jnp.zeros(())))
         mask = sol.stats["support"] | keep
-        sol = stls_qr(qr, refit, initial_mask=mask if support is None else mask & support)
+        sol = stls_qr(fit_qr, refit, initial_mask=mask if support is None else mask & support)
+    if x_noise is not None:  # the recorded samples' residual (the corrected problem's is smaller)
+        sol.stats["rss"] = residual_sum_of_squares(qr, sol.value)
     cov = coefficient_covariance(qr, sol.value, sol.stats["support"])
-    extra = {}
     if noise is not None:
         cov, extra["noise_ratio"] = structured_covariance(theta, y, w, sol.value, sol.stats["support"], noise)
     fit = LocalFit(

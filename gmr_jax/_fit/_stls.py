@@ -154,6 +154,11 @@ def stls_qr(
     return Solution(value=coef, result=result, stats=stats)
 
 
+def residual_sum_of_squares(qr: QRData, coef) -> Float[Array, ""]:
+    """||y - Θ c||² of the problem `qr` compressed."""
+    return jnp.maximum(qr.yy - jnp.sum(qr.z**2), 0.0) + jnp.sum((qr.r @ coef - qr.z) ** 2)
+
+
 def coefficient_covariance(qr: QRData, coef, support) -> Float[Array, "terms terms"]:
     """OLS covariance sigma² (Θ_S^T Θ_S)^-1 on the support (zeros elsewhere).
 

@@ -71,3 +71,20 @@ def well_noise(recs, group: list[int], i: int, masses: np.ndarray, topology) -> 
                        white=jnp.asarray(white, float))
 
 
+
+
+def x_noise_variance(recs, group: list[int], i: int) -> float | None:
+    """The variance of the white noise on DOF `i`'s measured displacement at one well (the
+    recordings `group`; each channel's Welch floor, `channel_variance`, pooled by samples), for
+    the errors-in-variables correction of its local fit (`_fit/_errors_in_variables.py`). None
+    where that correction does not hold: x estimated (integrated), or accelerations estimated
+    from x (their noise is the noise of x, filtered: not independent of it)."""
+    total, var = 0, 0.0
+    for k in group:
+        r = recs[k]
+        how = (r.derivation or {}).get("a")
+        if "x" in r.derived or (how is not None and how["from"] == "x"):
+            return None
+        total += r.n_samples
+        var += r.n_samples * channel_variance(r.x[:, i], r.dt)
+    return var / total if total else None

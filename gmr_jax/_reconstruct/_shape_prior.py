@@ -36,11 +36,16 @@ The report (per DOF) says which orders were borrowed at which well, from which c
 estimated `tau`, and the cells left out with the reason.
 """
 
+import jax.numpy as jnp
 import jax.scipy.special as jsp
 import numpy as np
 
+from .._fit._errors_in_variables import compressed_problem
 from .._fit._library import STIFFNESS, Library
 from .._fit._local_fit import with_constant
+from .._trace_cache import disk_traced
+
+_compressed = disk_traced(compressed_problem)  # called outside jit: one compiled program
 
 #: Wells at the same relative position: |u_jk - u_0k| below this (u = (x - x_0) / L).
 POSITION_TOL = 0.05
@@ -232,20 +237,22 @@ def share_curvature(fits_per_dof, library: Library, n_sigma: float):
     return plan, summary
 
 
-def refit_with_prior(q, v, y, w, library: Library, coef, rss, n_samples, span, borrow):
+def refit_with_prior(q, v, y, w, library: Library, coef, rss, n_samples, span, borrow, x_noise=None):
     """One well's local fit refitted on its own data with the borrowed orders as a Gaussian
     prior (`share_curvature`): support = the fit's own plus the borrowed q^m; the data rows
     weighted by the fit's residual variance, one prior row per borrowed order,
-    (a_m - rho a_1 / L^(m-1)) / (sd |a_1| / L^(m-1)). Returns (coef, covariance): the posterior
-    mean and covariance (NumPy)."""
+    (a_m - rho a_1 / L^(m-1)) / (sd |a_1| / L^(m-1)). The data enter compressed (R, z of the
+    library's QR), corrected for the noise on x where `x_noise` (its variance) is given, as the
+    local fit was (`_errors_in_variables`). Returns (coef, covariance): the posterior mean and
+    covariance (NumPy)."""
     idx = library.indices(STIFFNESS)  # q^0 .. q^r, in order
     support = with_constant(np.asarray(coef) != 0, library)  # the force at the mean moves with the curvature
     for m in borrow:
         support[idx[m]] = True
     cols = np.nonzero(support)[0]
-    theta = np.asarray(library(q, v), float)[:, cols]
-    keep = np.asarray(w) > 0
-    theta, y = theta[keep], np.asarray(y, float)[keep]
+    qr = _compressed(*(jnp.asarray(a, float) for a in (q, v, y, w)), library,
+                     None if x_noise is None else jnp.asarray(x_noise, float))
+    theta, y = np.asarray(qr.r, float)[:, cols], np.asarray(qr.z, float)
     n_data = int(np.sum(np.asarray(coef) != 0))
     sigma = np.sqrt(max(float(rss), 1e-300) / max(float(n_samples) - n_data, 1.0))
     a1 = float(coef[idx[1]])
