@@ -200,3 +200,20 @@ def test_reconstruct_corrects_the_stiff_cell_of_a_noisy_chain():
     assert np.mean(z[False]) < -2.5 and abs(np.mean(z[True])) < 1.0
     assert max(errors[True]) < 0.005 < max(errors[False])
 
+
+
+def test_a_floor_that_is_not_flat_is_not_taken_for_white_noise():
+    from scipy.signal import butter, sosfiltfilt
+
+    from gmr_jax._reconstruct._noise import white_floor
+
+    rng = np.random.default_rng(1)
+    dt = 1e-3
+    t = np.arange(20000) * dt
+    x = 1e-3 * np.sin(2 * np.pi * 3 * t) + 1e-5 * rng.standard_normal(t.size)
+    assert white_floor(x, dt) == pytest.approx(1e-10, rel=0.1)
+    # anti-aliasing roll-off: the top of the band falls away
+    sos = butter(8, 300.0, fs=1 / dt, output="sos")
+    assert white_floor(sosfiltfilt(sos, x), dt) is None
+    # a response whose spectrum still falls at the top of the band (red noise, not white)
+    assert white_floor(np.cumsum(rng.standard_normal(t.size)) * 1e-6, dt) is None

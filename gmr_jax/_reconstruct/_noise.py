@@ -85,6 +85,32 @@ def x_noise_variance(recs, group: list[int], i: int) -> float | None:
         how = (r.derivation or {}).get("a")
         if "x" in r.derived or (how is not None and how["from"] == "x"):
             return None
+        floor = white_floor(r.x[:, i], r.dt)
+        if floor is None:
+            return None
         total += r.n_samples
-        var += r.n_samples * channel_variance(r.x[:, i], r.dt)
+        var += r.n_samples * floor
     return var / total if total else None
+
+
+#: The spectrum's level over the top fifth of the band and over the fifth centred on half of it
+#: may differ by at most this factor for the floor to be read as white noise (`white_floor`; the
+#: band means of white noise scatter by a few per cent).
+FLAT = 1.5
+
+
+def white_floor(signal: np.ndarray, dt: float) -> float | None:
+    """`channel_variance` where the top of the spectrum is flat, else None: its mean level over
+    the top fifth of the band and over 0.4-0.6 of it within a factor `FLAT` (white noise: 1
+    within its scatter; a response whose spectrum still falls there, or an anti-aliasing filter's
+    roll-off, fails it, and the noise of x is then not known well enough to correct for)."""
+    from scipy.signal import welch
+
+    sig = np.asarray(signal, float)
+    if sig.size < 64 or not np.all(np.isfinite(sig)):
+        return None
+    f, p = welch(sig - np.mean(sig), fs=1.0 / dt, nperseg=int(min(sig.size, 256)))
+    top, below = float(np.mean(p[f >= 0.8 * f[-1]])), float(np.mean(p[(f >= 0.4 * f[-1]) & (f < 0.6 * f[-1])]))
+    if not (top > 0 and below > 0) or max(top / below, below / top) > FLAT:
+        return None
+    return top / (2.0 * dt)
