@@ -217,3 +217,37 @@ def test_a_floor_that_is_not_flat_is_not_taken_for_white_noise():
     assert white_floor(sosfiltfilt(sos, x), dt) is None
     # a response whose spectrum still falls at the top of the band (red noise, not white)
     assert white_floor(np.cumsum(rng.standard_normal(t.size)) * 1e-6, dt) is None
+
+
+def test_joint_normal_equations_corrected_in_expectation():
+    """The joint regression's corrected G and b (`_joint._corrected`), averaged over noise draws on
+    u, are the noise-free ones (the corrected score's defining property), while the recorded ones
+    are not."""
+    from gmr_jax._coordination._joint import _corrected, _Layout
+
+    layout = _Layout(5, 2, (3,))
+    rng = np.random.default_rng(4)
+    n = 400
+    t = np.linspace(0, 10, n)
+    u = np.stack([-0.5 + 0.05 * np.sin(3 * t), 0.5 + 0.04 * np.sin(2.3 * t + 1)])
+    vs = np.stack([0.15 * np.cos(3 * t), 0.092 * np.cos(2.3 * t + 1)])
+    ys = np.sin(5 * u) + 0.3 * vs
+    w = np.ones_like(u)
+    s2 = np.array([0.01**2, 0.008**2])
+
+    def normal(uu):
+        cols = np.asarray(layout.columns(jnp.asarray(uu), jnp.asarray(vs)))
+        return np.einsum("wn,wnp,wnq->pq", w, cols, cols), np.einsum("wn,wnp,wn->p", w, cols, ys)
+
+    g0, b0 = normal(u)
+    draws = 400
+    acc_g, acc_b, raw_g = 0.0, 0.0, 0.0
+    for _ in range(draws):
+        un = u + np.sqrt(s2)[:, None] * rng.standard_normal(u.shape)
+        g1, b1 = normal(un)
+        g2, b2 = _corrected(g1, b1, un, vs, ys, w, s2, layout, np.ones(layout.p))
+        acc_g, acc_b, raw_g = acc_g + g2 / draws, acc_b + b2 / draws, raw_g + g1 / draws
+    scale = np.sqrt(np.outer(np.diag(g0), np.diag(g0)))
+    assert np.max(np.abs(acc_g - g0) / scale) < 2e-3
+    assert np.max(np.abs(raw_g - g0) / scale) > 5 * np.max(np.abs(acc_g - g0) / scale)
+    np.testing.assert_allclose(acc_b, b0, atol=3e-3 * np.max(np.abs(b0)))

@@ -141,6 +141,42 @@ class _Layout(eqx.Module):
                                 jnp.stack(vel, axis=-1).reshape(v.shape + (len(self.vel),))], axis=-1)
 
 
+def _corrected(gram, rhs, u, vs, ys, w, s2u, layout: _Layout, scale):
+    """The joint normal equations (scaled columns) corrected for white noise of variance `s2u`
+    (per well, in u) on u: every column is a polynomial in u (Chebyshev) times a factor of v, so
+    the products in G and b are polynomials in u, and each power u^n is replaced by its Hermite
+    polynomial He_n(u; s²) (`_fit/_errors_in_variables.py`). The recorded equations where the
+    corrected G is not positive definite or not finite."""
+    k, j = layout.k, layout.j
+    n_max = 2 * max(k, j)
+    poly = np.zeros((layout.p, n_max + 1))
+    poly[: k + 1, : k + 1] = cheb_to_monomial(k).T
+    poly[k + 1 : k + j + 2, : j + 1] = cheb_to_monomial(j).T
+    poly[k + j + 2 :, 0] = 1.0
+    fac = np.concatenate([np.ones(u.shape + (k + 1,)), np.repeat(vs[..., None], j + 1, axis=-1),
+                          np.stack([np.sign(vs) * np.abs(vs) ** o for o in layout.vel], axis=-1)
+                          .reshape(vs.shape + (len(layout.vel),))], axis=-1) / scale
+    # q^n - He_n(q; s²) per well (rows), recurrences as `hermite_excess`
+    s2 = np.asarray(s2u, float).reshape(-1, 1)
+    he, dd = [np.ones_like(u), u], [np.zeros_like(u), np.zeros_like(u)]
+    for m in range(1, n_max):
+        he.append(u * he[m] - m * s2 * he[m - 1])
+        dd.append(u * dd[m] + m * s2 * he[m - 1])
+    dq = np.stack(dd[: n_max + 1], axis=-1)  # (wells, samples, n)
+    conv = np.zeros((layout.p, layout.p, 2 * n_max + 1))
+    for a in range(n_max + 1):
+        for b in range(n_max + 1):
+            conv[:, :, a + b] += np.outer(poly[:, a], poly[:, b])
+    conv = conv[:, :, : n_max + 1]  # a product of two columns has degree <= n_max
+    moments = np.einsum("wt,wtn,wta,wtb->nab", w, dq, fac, fac, optimize=True)
+    delta = np.einsum("abn,nab->ab", conv, moments)
+    small = np.einsum("an,wtn,wta,wt->a", poly, dq, fac, w * ys, optimize=True)
+    g2, b2 = gram - delta, rhs - small
+    g2 = 0.5 * (g2 + g2.T)
+    ok = np.all(np.isfinite(g2)) and np.all(np.isfinite(b2)) and np.linalg.eigvalsh(g2).min() > 0
+    return (g2, b2) if ok else (gram, rhs)
+
+
 def _candidates(n_wells: int, layout: _Layout, settings: JointSettings):
     """Column masks and penalty indices of every candidate (static NumPy arrays)."""
     k_min = max(2 * n_wells - 1, 1)
@@ -237,6 +273,7 @@ def joint_coordinate(
     speed: float,
     settings: JointSettings = JointSettings(),
     refine: bool = True,
+    x_noise: Float[Array, " wells"] | None = None,
 ):
     """The joint coordination of one DOF (module docstring).
 
@@ -256,7 +293,10 @@ def joint_coordinate(
     adds to the covariance; `joint_conflict`: the best admissible score minus the best of all,
     and `joint_unconstrained`: the best candidate of all minus the chosen one, zeros unless the
     conflict exceeds `CONFLICT`). `refine`: on a conflict, search once more on the penalty grid
-    refined to half decades (module docstring).
+    refined to half decades (module docstring). `x_noise`: per well, the variance of white noise
+    on the measured x; the normal equations are then corrected for it (errors in variables, the
+    corrected score of `_fit/_errors_in_variables.py`, each power of u replaced by its Hermite
+    polynomial), the noise variance sigma^2 still taken from the recorded samples' residual.
     """
     xs, vs, ys, weights = (np.asarray(a, float) for a in (xs, vs, ys, weights))
     eq = np.asarray(equilibria, float)
@@ -274,6 +314,9 @@ def joint_coordinate(
     rhs = np.einsum("wn,wnp,wn->p", w, cols, ys)
     yy = float(np.einsum("wn,wn,wn->", w, ys, ys))
     n = float(weights.sum())
+    recorded = (gram, rhs)  # the recorded samples' normal equations (their residual gives sigma^2)
+    if x_noise is not None and not settings.damping_only:
+        gram, rhs = _corrected(gram, rhs, u, vs, ys, w, np.asarray(x_noise, float) / (2.0 * h) ** 2, layout, scale)
     sr, sd = scale[layout.restoring], scale[layout.damping]
     omega_r = _penalty(layout.k, settings.penalty_order) / np.outer(sr, sr)
     omega_d = _penalty(layout.j, min(2, layout.j)) / np.outer(sd, sd) if layout.j >= 2 else np.zeros((layout.j + 1,) * 2)
@@ -304,12 +347,16 @@ def joint_coordinate(
         grid = np.asarray(settings.log_lambdas, float)
         fine = tuple(np.unique(np.concatenate([grid, 0.5 * (grid[1:] + grid[:-1])])).tolist())
         return joint_coordinate(xs, vs, ys, weights, equilibria, well_variance, speed,
-                                dataclasses.replace(settings, log_lambdas=fine), refine=False)
+                                dataclasses.replace(settings, log_lambdas=fine), refine=False, x_noise=x_noise)
     if settings.tie > 0 and admissible.any():
         near = np.nonzero(score <= score[best] + settings.tie)[0]
         best = int(min(near, key=lambda i: (max(meta[i][2], default=1), meta[i][0], meta[i][1], score[i])))
     k, j, vel = meta[best]
-    sigma2 = float(rss[best]) / max(n - float(edf[best]), 1.0)
+    rss_best = float(rss[best])
+    if recorded[0] is not gram:  # the residual of the recorded samples, not of the corrected problem
+        th, g0, b0 = theta[best] * masks[best], recorded[0], recorded[1]
+        rss_best = max(yy - 2.0 * float(th @ b0) + float(th @ g0 @ th), 1e-300 * yy)
+    sigma2 = rss_best / max(n - float(edf[best]), 1.0)
     cov_theta = sigma2 * ainv[best] * masks[best][:, None] * masks[best][None, :]
     # map to monomial coefficients in x
     to_x = lambda deg: np.asarray(monomial_map(c, 2.0 * h, deg + 1)) @ cheb_to_monomial(deg)  # noqa: E731

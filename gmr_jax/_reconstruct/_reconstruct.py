@@ -423,15 +423,17 @@ def _joint_explains_as_well(joint: Solution, paper: Solution, xs, vs, ys, w) -> 
 
 
 def _joint(fits: LocalFit, xs, vs, ys, w, speed: float, restoring: Solution | None = None,
-           settings: JointSettings = JointSettings()) -> Solution:
+           settings: JointSettings = JointSettings(), x_noise=None) -> Solution:
     """The joint coordination (`joint_coordinate`) as a `Solution` like `coordinate`'s; given
     the paper route's `restoring` (a `coordinate` Solution), only the damping is refitted,
-    to the force left after its restoring force."""
+    to the force left after its restoring force. `x_noise`: per well, the variance of the noise
+    on x (None where any well has none): the regression is corrected for it."""
     eq = np.asarray(fits.equilibrium)
     var = np.asarray(fits.rss) / np.maximum(np.asarray(fits.n_samples), 1.0)
     var = np.where(var > 0, var, np.max(var) if np.any(var > 0) else 1.0)
     if restoring is None:
-        stiff, vdamp, pdamp, cov, stats = joint_coordinate(xs, vs, ys, w, eq, var, speed, settings)
+        eiv = None if x_noise is None or any(v is None for v in x_noise) else np.asarray(x_noise, float)
+        stiff, vdamp, pdamp, cov, stats = joint_coordinate(xs, vs, ys, w, eq, var, speed, settings, x_noise=eiv)
     else:
         stiff = np.asarray(restoring.value.stiffness)
         ys = np.asarray(ys) - np.polynomial.polynomial.polyval(np.asarray(xs), stiff)
@@ -497,7 +499,7 @@ def _calibrated(coord: Solution, fits: LocalFit, library: Library, route: str, p
 
 
 def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordination: str, mass: float, i: int,
-                    odd_only: bool = False):
+                    odd_only: bool = False, x_noise=None):
     """One DOF's coordination route (`reconstruct`'s `coordination`; "auto": the paper route, GLS,
     checked for inadmissible shapes and faults, replaced or complemented by the joint regression where
     the module's rules say so). `odd_only`: the GLS takes odd degrees only (a DOF that borrowed
@@ -510,7 +512,7 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
     energy = None if speed is None else 0.5 * float(mass) * speed**2  # the model's energy bound
     lowered = []  # a borrowed law lowered to a degree that confines (`confine_borrowed`)
     if coordination == "joint":
-        coord = _joint(fits, xs, vs, ys, w, speed)
+        coord = _joint(fits, xs, vs, ys, w, speed, x_noise=x_noise)
     else:
         coord = jax.device_get(coordinate(fits, library, method="gls" if coordination == "auto" else coordination,
                                           confining=odd_only, throw=False))
@@ -524,7 +526,7 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
             paper = coord
             paper_sound = not faults["data"]
             if faults["data"]:
-                coord, route = _joint(fits, xs, vs, ys, w, speed), "joint"
+                coord, route = _joint(fits, xs, vs, ys, w, speed, x_noise=x_noise), "joint"
             else:
                 # A restoring shape that is inadmissible (even degree, turning outward, extra sign changes)
                 # is the paper's verdict only where redundant local data test it (the over-determined GLS:
@@ -555,7 +557,7 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                                  f"({energy:.3g}) reaches an escape"]
                     unconfirmed = False
                 if unconfirmed:
-                    cand = _joint(fits, xs, vs, ys, w, speed, settings=_replacement_settings(paper))
+                    cand = _joint(fits, xs, vs, ys, w, speed, settings=_replacement_settings(paper), x_noise=x_noise)
                     ok, reason = _joint_explains_as_well(cand, paper, xs, vs, ys, w)
                     if ok:
                         coord, route = cand, "joint"
@@ -811,7 +813,8 @@ def reconstruct(
             fits, borrowed = _borrow(fits, plan[i], xs, vs, ys, w, library, x_noises[i])
         say(f"{f'DOF {i} ({i + 1}/{d}): ' if d > 1 else ''}coordination ({coordination})")
         coord, route, why, paper_sound, confining, found = _coordinate_dof(
-            fits, xs, vs, ys, w, library, coordination, float(masses[i]), i, odd_only=any(borrowed))
+            fits, xs, vs, ys, w, library, coordination, float(masses[i]), i, odd_only=any(borrowed),
+            x_noise=x_noises[i])
         if any(borrowed) and route == "joint":
             # the law with the borrowed orders was inadmissible and the joint regression (which sees
             # only this cell's data) would replace it: the cell goes on alone (torque-free Kresling,
@@ -819,7 +822,7 @@ def reconstruct(
             design_why = "the borrowed orders gave an inadmissible law: " + "; ".join(why[:1])
             fits, borrowed = data_fits, []
             coord, route, why, paper_sound, confining, found = _coordinate_dof(
-                fits, xs, vs, ys, w, library, coordination, float(masses[i]), i)
+                fits, xs, vs, ys, w, library, coordination, float(masses[i]), i, x_noise=x_noises[i])
         warnings += found
         if coord.result != RESULTS.successful:
             failure.note(coord.result, f"DOF {i}: coordination of the equilibria "
