@@ -74,6 +74,36 @@ def test_fit_hand_made_csv(joint_files, tmp_path, capsys):
     np.testing.assert_allclose(written["data_range"], [[x.min(), x.max()]])
 
 
+def test_fit_corrects_for_the_noise_on_a_measured_x(tmp_path, capsys):
+    """x, v, a measured at 30 dB: the local fits are corrected for the noise on x (said, and kept in
+    the model file's coordination entries); `--no-eiv` fits plain least squares; an x-only file is
+    never corrected (its accelerations carry the noise of x)."""
+    s = g.systems.bistable_joint("position_independent")
+    recs = g.systems.make_recordings(s, np.deg2rad(1.0), snr_db=30.0, seed=3, duration=5.0)
+    paths = []
+    for r in recs:
+        paths.append(str(tmp_path / f"{r.name}.npz"))
+        r.save(paths[-1])
+    out, plain = tmp_path / "m.json", tmp_path / "plain.json"
+    assert main(["fit", *paths, "--out", str(out), "--no-figure"]) == 0
+    printed = capsys.readouterr().out
+    assert "corrected for the noise on x (errors in variables" in printed
+    wells = json.loads(out.read_text())["coordination"][0]["errors_in_variables"]
+    true_sd = [np.sqrt(np.var(r.x[:, 0]) / 1e3) for r in recs]  # the noise make_recordings added
+    assert all(w["applied"] for w in wells)
+    np.testing.assert_allclose([w["noise_sd"] for w in wells], true_sd, rtol=0.15)
+    assert main(["fit", *paths, "--out", str(plain), "--no-figure", "--no-eiv"]) == 0
+    assert "errors in variables" not in capsys.readouterr().out
+    assert "errors_in_variables" not in json.loads(plain.read_text())["coordination"][0]
+    assert not np.allclose(np.asarray(g.load_model(out).stiffness), np.asarray(g.load_model(plain).stiffness))
+    xonly = tmp_path / "xonly.npz"
+    np.savez(xonly, t=recs[0].t, x=recs[0].x, base_acc=recs[0].base_acc)
+    xonly2 = tmp_path / "xonly2.npz"
+    np.savez(xonly2, t=recs[1].t, x=recs[1].x, base_acc=recs[1].base_acc)
+    assert main(["fit", str(xonly), str(xonly2), "--out", str(tmp_path / "x.json"), "--no-figure"]) == 0
+    assert "errors in variables" not in capsys.readouterr().out
+
+
 @pytest.mark.slow
 def test_fit_manual_threshold_and_baseline(joint_files, tmp_path):
     """A fixed threshold and the baseline (GMC-SINDy) from the CLI; end to end, so slow tier (the

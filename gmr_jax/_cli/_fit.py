@@ -16,7 +16,7 @@ from .._errors import GMRInputError
 from .._reconstruct._sanity import GMRDataWarning
 from ._args import add_columns_option, load_recordings, positive_int
 from ._progress import stage
-from ._show import _term_table, format_coordination, format_shared_design
+from ._show import _term_table, format_coordination, format_eiv, format_shared_design
 
 
 def register(sub):
@@ -57,19 +57,6 @@ def register(sub):
     return f
 
 
-def format_eiv(stats: dict) -> list[str]:
-    """One line per DOF whose local fits were corrected for the noise on x (errors in variables)."""
-    lines = []
-    for i, rep in enumerate(stats.get("dofs", [])):
-        wells = [w for w in (rep.stats.get("errors_in_variables") or []) if w and w["applied"]]
-        if wells:
-            rel = [100 * w["of_vibration"] for w in wells]
-            lines.append(f"  DOF {i}: local fits corrected for the noise on x (errors in variables; its sd "
-                         f"{min(rel):.2g}-{max(rel):.2g} % of the vibration at {len(wells)} well(s); --no-eiv: "
-                         "plain least squares)")
-    return lines
-
-
 def data_range(recs):
     """[min, max] of each DOF's displacement over the training recordings: the region where the
     model was fitted (`gmr basins`/`actuate` look for wells there when no --x-range is given)."""
@@ -95,7 +82,10 @@ def coordination_of(stats: dict) -> list[dict]:
         route = rep.stats.get("coordination") if isinstance(rep.stats, dict) else None
         if route is None:
             return []
-        rows.append({"route": str(route), "notes": [str(n) for n in rep.stats.get("paper_route_rejected", [])]})
+        row = {"route": str(route), "notes": [str(n) for n in rep.stats.get("paper_route_rejected", [])]}
+        if any(rep.stats.get("errors_in_variables") or []):
+            row["errors_in_variables"] = rep.stats["errors_in_variables"]
+        rows.append(row)
     return rows
 
 
@@ -174,7 +164,7 @@ def run(args) -> int:
     if "resolution" in st:
         print("What each well's data resolved (and the excitation that would resolve what they did not):")
         print(str(st["resolution"]))
-    for line in format_eiv(st):
+    for line in format_eiv(routes):
         print(line)
     if any(r.v is None or r.a is None for r in recs):
         print("  note: velocities/accelerations were estimated from x (Savitzky-Golay, see README)")

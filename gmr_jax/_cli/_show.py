@@ -32,6 +32,21 @@ def format_coordination(routes: list[dict]) -> list[str]:
     return (["  coordination route per DOF:"] + out) if out else []
 
 
+def format_eiv(routes: list[dict]) -> list[str]:
+    """`gmr fit`/`gmr show`: per DOF whose local fits were corrected for the noise on x (errors in
+    variables; the `errors_in_variables` of its coordination entry), how loud that noise was."""
+    lines = []
+    for i, r in enumerate(routes):
+        wells = [w for w in ((r.get("errors_in_variables") or []) if isinstance(r, dict) else [])
+                 if isinstance(w, dict) and w.get("applied")]
+        if wells:
+            rel = [100 * float(w.get("of_vibration", float("nan"))) for w in wells]
+            lines.append(f"  DOF {i}: local fits corrected for the noise on x (errors in variables; its sd "
+                         f"{min(rel):.2g}-{max(rel):.2g} % of the vibration at {len(wells)} well(s); --no-eiv: "
+                         "plain least squares)")
+    return lines
+
+
 def format_shared_design(design: list[dict]) -> list[str]:
     """`gmr fit`/`gmr show`: which cells lent which restoring orders to which (cells of one design)."""
     if not design:
@@ -210,6 +225,7 @@ def _describe(model, d: dict, name: str, p: int) -> str:
     if isinstance(routes, list) and routes:
         out += ["", "Coordination (the route per DOF and why):"]
         out += format_coordination(routes)[1:]
+        out += format_eiv(routes)
     design = d.get("shared_design")
     if isinstance(design, list) and design:
         out += ["", "Cells of one design (restoring orders lent as a prior to the weakly excited cells):"]

@@ -146,7 +146,7 @@ def _corrected(gram, rhs, u, vs, ys, w, s2u, layout: _Layout, scale):
     (per well, in u) on u: every column is a polynomial in u (Chebyshev) times a factor of v, so
     the products in G and b are polynomials in u, and each power u^n is replaced by its Hermite
     polynomial He_n(u; s²) (`_fit/_errors_in_variables.py`). The recorded equations where the
-    corrected G is not positive definite or not finite."""
+    corrected G is not positive semi-definite or not finite."""
     k, j = layout.k, layout.j
     n_max = 2 * max(k, j)
     poly = np.zeros((layout.p, n_max + 1))
@@ -173,8 +173,10 @@ def _corrected(gram, rhs, u, vs, ys, w, s2u, layout: _Layout, scale):
     small = np.einsum("an,wtn,wta,wt->a", poly, dq, fac, w * ys, optimize=True)
     g2, b2 = gram - delta, rhs - small
     g2 = 0.5 * (g2 + g2.T)
-    ok = np.all(np.isfinite(g2)) and np.all(np.isfinite(b2)) and np.linalg.eigvalsh(g2).min() > 0
-    return (g2, b2) if ok else (gram, rhs)
+    if not (np.all(np.isfinite(g2)) and np.all(np.isfinite(b2))):
+        return gram, rhs
+    eig = np.linalg.eigvalsh(g2)  # a column that is zero on these data stays a null direction of both
+    return (g2, b2) if eig.min() >= -1e-10 * eig.max() else (gram, rhs)
 
 
 def _candidates(n_wells: int, layout: _Layout, settings: JointSettings):
