@@ -2,6 +2,8 @@ import json
 import subprocess
 import sys
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -95,7 +97,9 @@ def test_fit_corrects_for_the_noise_on_a_measured_x(tmp_path, capsys):
     assert main(["fit", *paths, "--out", str(plain), "--no-figure", "--no-eiv"]) == 0
     assert "errors in variables" not in capsys.readouterr().out
     assert "errors_in_variables" not in json.loads(plain.read_text())["coordination"][0]
-    assert not np.allclose(np.asarray(g.load_model(out).stiffness), np.asarray(g.load_model(plain).stiffness))
+    xs = np.linspace(-1.2, 1.2, 41)[:, None]
+    f_eiv, f_plain = (np.asarray(jax.vmap(g.load_model(p).restoring)(jnp.asarray(xs))) for p in (out, plain))
+    assert not np.allclose(f_eiv, f_plain, rtol=1e-6)
     xonly = tmp_path / "xonly.npz"
     np.savez(xonly, t=recs[0].t, x=recs[0].x, base_acc=recs[0].base_acc)
     xonly2 = tmp_path / "xonly2.npz"
