@@ -777,7 +777,9 @@ def reconstruct(
         keep = low_order_terms(library, keep_restoring_order) if keep_low_orders else None
         noise = [_noise.well_noise(recs, grp, i, masses, topology) if structured_noise else None
                  for grp in groups]  # None: a measured, or OLS asked for
-        x_noise = [_noise.x_noise_variance(recs, grp, i) if errors_in_variables else None for grp in groups]
+        # variances as arrays: a Python float is static to the jitted fit (one compile per value)
+        x_noise = [None if (var := _noise.x_noise_variance(recs, grp, i) if errors_in_variables else None) is None
+                   else jnp.asarray(var, float) for grp in groups]
         say(f"{f'DOF {i} ({i + 1}/{d}): ' if d > 1 else ''}local fits at {len(groups)} wells")
         sols = jax.device_get(_fit_wells(xs, vs, ys, w, library, solver, select, keep, noise, x_noise))  # NumPy
         fits: LocalFit = sols.value
