@@ -82,7 +82,7 @@ def fit_local(
     else:
         cv = {}
     qr = compress(theta, y, weights)
-    extra = {}
+    extra = {"eiv_applied": jnp.asarray(False)}  # in every fit's stats: wells with and without stack alike
     fit_qr = qr
     if x_noise is not None:
         fit_qr, extra["eiv_applied"] = corrected_qr(qr, x - xe, v, y, w, library, jnp.asarray(x_noise, float))
