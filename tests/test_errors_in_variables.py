@@ -268,3 +268,33 @@ def test_noise_variances_do_not_recompile_the_local_fit():
         assert all(w and w["applied"] for w in sol.stats["dofs"][0].stats["errors_in_variables"])
         sizes.append(jitted._cached._cache_size())
     assert sizes[1] == sizes[0]
+
+
+def test_joint_scores_the_corrected_law_by_the_recorded_residual():
+    """`joint_coordinate(x_noise=...)` solves the corrected equations but its residual variance
+    (sigma^2, and the score) is the recorded samples' own: checked against the residual of the
+    returned law on the raw data, computed here in NumPy."""
+    from gmr_jax._coordination._joint import JointSettings, joint_coordinate
+
+    rng = np.random.default_rng(5)
+    n = 1500
+    t = np.linspace(0, 30, n)
+    xs, vs = [], []
+    for e, a, f in ((-1.0, 0.05, 1.3), (1.0, 0.04, 1.7)):
+        xs.append(e + a * np.sin(2 * np.pi * f * t))
+        vs.append(2 * np.pi * f * a * np.cos(2 * np.pi * f * t))
+    xs, vs = np.stack(xs), np.stack(vs)
+    ys = -xs + xs**3 + 0.1 * vs
+    xs_obs = xs + 0.002 * rng.standard_normal(xs.shape)
+    ys = ys + 0.002 * rng.standard_normal(ys.shape)
+    w = np.ones_like(xs)
+    settings = JointSettings(max_degree=5, max_damping_degree=1, velocity_orders=(3,))
+    stiff, vdamp, pdamp, _, stats = joint_coordinate(xs_obs, vs, ys, w, np.array([-1.0, 1.0]), np.ones(2), 1.0,
+                                                     settings, x_noise=np.array([0.002**2, 0.002**2]))
+    s, b, p = (np.asarray(a) for a in (stiff, vdamp, pdamp))
+    pred = np.polynomial.polynomial.polyval(xs_obs, s)
+    pred += sum(b[j] * np.sign(vs) * np.abs(vs) ** j for j in range(b.size))
+    pred += sum(p[j] * xs_obs**j * vs for j in range(1, p.size))
+    rss = float(np.sum((ys - pred) ** 2))
+    np.testing.assert_allclose(stats["joint_sigma2"] * (w.sum() - stats["joint_edf"]), rss, rtol=1e-6)
+    np.testing.assert_allclose(s[[1, 3]], [-1.0, 1.0], atol=0.05)

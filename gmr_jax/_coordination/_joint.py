@@ -220,13 +220,19 @@ def _penalty_terms(meta, omega_r, omega_d):
 
 
 @eqx.filter_jit
-def _select(gram, rhs, yy, n, omega_r, omega_d, masks, lam_r, lam_d, log_r, log_d, checks, pen, layout: _Layout):
+def _select(gram, rhs, yy, n, omega_r, omega_d, masks, lam_r, lam_d, log_r, log_d, checks, pen, layout: _Layout,
+            recorded=None):
     """Solve, score and check every candidate; returns the per-candidate arrays.
 
     Score: -2 log marginal likelihood of the penalised regression read as a Gaussian prior
     (flat on the penalties' null spaces, noise variance profiled out), plus p0 log n for the
     p0 unpenalised columns (BIC's charge for the terms no prior constrains):
-    (n - p0) log s2 + log|G + P| - log|P|_+ + p0 log n, s2 = (y'y - b' theta) / (n - p0)."""
+    (n - p0) log s2 + log|G + P| - log|P|_+ + p0 log n, s2 = (y'y - 2 b'theta + theta'(G + P) theta)
+    / (n - p0) (= (y'y - b'theta) / (n - p0) at the solution). `recorded`: the normal equations
+    (G, b) of the recorded samples where `gram`, `rhs` were corrected for the noise on x: theta
+    solves the corrected ones, s2 and the residual are the recorded samples' (a corrected residual
+    leaves out the noise of x it still holds, and sharpens every comparison by as much)."""
+    g0, b0 = (gram, rhs) if recorded is None else recorded
     p = gram.shape[0]
     rr, dd = layout.restoring, layout.damping
     scale_r = jnp.trace(gram[rr, rr]) / jnp.trace(omega_r)
@@ -247,9 +253,11 @@ def _select(gram, rhs, yy, n, omega_r, omega_d, masks, lam_r, lam_d, log_r, log_
         ainv, logdet = inverse_logdet(a)
         b = rhs * mk
         theta = ainv @ b
-        rss = jnp.maximum(yy - 2.0 * theta @ b + theta @ g @ theta, 1e-300 * yy)
+        g_rec, b_rec = g0 * both, b0 * mk
+        rss = jnp.maximum(yy - 2.0 * theta @ b_rec + theta @ g_rec @ theta, 1e-300 * yy)
         edf = jnp.trace(ainv @ g)
-        s2 = jnp.maximum(yy - theta @ b, 1e-300 * yy) / (n - p0)
+        penalised = theta @ (a - g - jnp.diag(1.0 - mk)) @ theta  # theta' P theta (ridge included)
+        s2 = jnp.maximum(rss + penalised, 1e-300 * yy) / (n - p0)
         logdet_p = q_r * jnp.log(lr) + ld_r + jnp.where(q_d > 0, q_d * jnp.log(jnp.maximum(ld, 1e-300)) + ld_d, 0.0)
         bic = (n - p0) * jnp.log(s2) + logdet - logdet_p + p0 * jnp.log(n)
         # admissibility
@@ -332,7 +340,8 @@ def joint_coordinate(
     pen = _penalty_terms(meta, omega_r, omega_d)
     out = _select(jnp.asarray(gram), jnp.asarray(rhs), yy, n, jnp.asarray(omega_r), jnp.asarray(omega_d),
                   masks, lam_r, lam_d, jnp.asarray(settings.log_lambdas), jnp.asarray(settings.log_lambdas_damping),
-                  (jnp.asarray(grid_f), jnp.asarray(grid_d)), tuple(pen), layout)
+                  (jnp.asarray(grid_f), jnp.asarray(grid_d)), tuple(pen), layout,
+                  tuple(jnp.asarray(a) for a in recorded))
     theta, ainv, rss, edf, bic, changes, confines, dissipative = (np.asarray(a) for a in out)
     shape_ok = (changes == 2 * n_wells - 1) & confines if not settings.damping_only else True
     admissible = shape_ok & dissipative & np.isfinite(bic)
@@ -354,11 +363,7 @@ def joint_coordinate(
         near = np.nonzero(score <= score[best] + settings.tie)[0]
         best = int(min(near, key=lambda i: (max(meta[i][2], default=1), meta[i][0], meta[i][1], score[i])))
     k, j, vel = meta[best]
-    rss_best = float(rss[best])
-    if recorded[0] is not gram:  # the residual of the recorded samples, not of the corrected problem
-        th, g0, b0 = theta[best] * masks[best], recorded[0], recorded[1]
-        rss_best = max(yy - 2.0 * float(th @ b0) + float(th @ g0 @ th), 1e-300 * yy)
-    sigma2 = rss_best / max(n - float(edf[best]), 1.0)
+    sigma2 = float(rss[best]) / max(n - float(edf[best]), 1.0)  # the recorded samples' residual
     cov_theta = sigma2 * ainv[best] * masks[best][:, None] * masks[best][None, :]
     # map to monomial coefficients in x
     to_x = lambda deg: np.asarray(monomial_map(c, 2.0 * h, deg + 1)) @ cheb_to_monomial(deg)  # noqa: E731
