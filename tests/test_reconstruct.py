@@ -135,3 +135,22 @@ def test_damping_terms_found_at_one_well_only_are_dropped():
     for i in range(1, 5):  # cells where every well agrees are untouched
         assert res.stats["dofs"][i].stats["dropped_velocity_damping"] == []
         np.testing.assert_array_equal(res.stats["dofs"][i].local_coef, raw.stats["dofs"][i].local_coef)
+
+
+def test_screen_truncates_the_restoring_series_from_the_top_only():
+    """An unresolved q^3 under a resolved q^4 is kept (the coordination would take a zero there as
+    exact); an unresolved top order is dropped; a zero STLS chose stays a known zero."""
+    from gmr_jax._reconstruct._reconstruct import _screen
+
+    lib = g.Library(5, 1)  # 1, q .. q^5, sgn(v), v, q v
+    se = np.array([1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0])
+    coef = np.array([[5.0, 9.0, 4.0, 2.0, 6.0, 1.0, 0.5, 8.0, 0.2],   # q^3 at t = 2 under q^4 at 6; q^5 at 1
+                     [5.0, 9.0, 0.0, 2.0, 6.0, 0.0, 0.0, 8.0, 4.0]])  # q^2 a zero STLS chose
+    fits = g.LocalFit(equilibrium=np.zeros(2), coef=coef, covariance=np.stack([np.diag(se**2)] * 2),
+                      threshold=np.zeros(2), rss=np.ones(2), n_samples=np.full(2, 100.0))
+    out = np.asarray(_screen(fits, 3.0, lib).coef)
+    np.testing.assert_array_equal(out[0], [5.0, 9.0, 4.0, 2.0, 6.0, 0.0, 0.0, 8.0, 0.0])
+    np.testing.assert_array_equal(out[1], [5.0, 9.0, 0.0, 2.0, 6.0, 0.0, 0.0, 8.0, 4.0])
+    assert np.asarray(_screen(fits, 3.0, lib).covariance)[0, 3, 3] == 1.0
+    plain = np.asarray(_screen(fits, 3.0).coef)  # without the library: every term on its own
+    assert plain[0, 3] == 0.0
