@@ -63,6 +63,11 @@ def format_shared_design(design: list[dict]) -> list[str]:
             out.append(f"    DOF {i}: borrowed {per_well}{degree}")  # why that degree: the coordination notes
         elif r.get("why"):
             out.append(f"    DOF {i}: on its own ({r['why']})")
+        law = r.get("law") if isinstance(r.get("law"), dict) else None
+        if law and "sd_after" in law:
+            out.append(f"    DOF {i}: law between the wells pooled with the design's (cells {law.get('cells')}): "
+                       f"sd {100 * float(law['sd_before']):.2g} -> {100 * float(law['sd_after']):.2g} % of "
+                       f"F'(well) x span, chi2 {float(law['chi2']):.2g} on {law.get('nodes')} nodes")
     return out
 
 

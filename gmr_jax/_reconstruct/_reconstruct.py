@@ -23,7 +23,7 @@ from .._model._predict import forces
 from .._recordings._recording import Recording, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
-from . import _noise, _resolution, _sanity, _shape_prior
+from . import _design_law, _noise, _resolution, _sanity, _shape_prior
 from ._degree import averaged_parts, confine_borrowed, degree, least_risk_degree, mixture, odd_degree, redundancy
 from ._sanity import GMRDataWarning
 
@@ -623,6 +623,34 @@ def _borrow(fits: LocalFit, plan: list[dict], xs, vs, ys, w, library: Library, x
     return eqx.tree_at(lambda f: (f.coef, f.covariance), fits, (coef, cov)), borrowed
 
 
+def _pool_laws(stiff: list, vdamp: list, pdamp: list, covs: list, reports: list, recs) -> None:
+    """`_design_law.pool_design_laws` on every DOF's law and calibrated covariance, in place; the
+    outcome per DOF goes to `reports[i].stats["shared_design"]["law"]`."""
+    sizes = [(a.size, b.size, c.size) for a, b, c in zip(stiff, vdamp, pdamp)]
+    ok = [np.asarray(cv).shape == (sum(n),) * 2 for cv, n in zip(covs, sizes)]
+    flats = [np.concatenate([a, b, c]) for a, b, c in zip(stiff, vdamp, pdamp)]
+    idx = [i for i in range(len(flats)) if ok[i]]
+    ranges = [np.concatenate([reports[i].equilibria, [min(float(r.x[:, i].min()) for r in recs),
+                                                      max(float(r.x[:, i].max()) for r in recs)]])
+              for i in range(len(flats))]  # where each DOF's wells are looked for
+    new_f, new_c, law = _design_law.pool_design_laws([flats[i] for i in idx], [sizes[i][0] for i in idx],
+                                                     [covs[i] for i in idx], [ranges[i] for i in idx])
+    members = [idx[k] for k in law["members"]]
+    for k, i in enumerate(idx):
+        ns, nv, _ = sizes[i]
+        stiff[i], vdamp[i], pdamp[i] = new_f[k][:ns], new_f[k][ns:ns + nv], new_f[k][ns + nv:]
+        covs[i] = new_c[k]
+        entry = {"cells": members, "tau": law["tau"]}
+        if k in law["per_dof"]:
+            entry |= law["per_dof"][k]
+        else:
+            entry["why"] = law["excluded"].get(k, "not pooled")
+        reports[i].stats.setdefault("shared_design", {})["law"] = entry
+    for i in range(len(flats)):
+        if not ok[i]:
+            reports[i].stats.setdefault("shared_design", {})["law"] = {"why": "its covariance is missing"}
+
+
 def _design_stats(design: dict | None, i: int, borrowed: list, why: str | None = None,
                   coord: Solution | None = None) -> dict:
     """`dofs[i].stats["shared_design"]`: the orders this DOF borrowed per well, the lending cells,
@@ -888,6 +916,9 @@ def reconstruct(
                "paper_route_rejected": why, "shared_design": _design_stats(design, i, borrowed, design_why, coord),
                "escapes": _sanity.escapes(np.asarray(g.stiffness), eq)},
         ))
+    if shared_design and d > 1:  # cells of one design: the law between the wells, pooled (`_design_law`)
+        say("cells of one design: their laws between the wells pooled")
+        _pool_laws(stiff, vdamp, pdamp, covs, reports, recs)
     say("training scores, sanity checks, resolution report")
     stderr = {STIFFNESS: jnp.asarray(stack_padded(se_s)), VELOCITY_DAMPING: jnp.asarray(stack_padded(se_v)),
               POSITION_DAMPING: jnp.asarray(stack_padded(se_p))}
