@@ -12,8 +12,8 @@ squares), and judged against the truth:
 
 Systems with every channel measured (x, v, a, base acceleration), white noise at 30 and 40 dB
 (each channel's fluctuation), seeds 0..N-1: the 2-cell cubic chain of `coverage.py`, the bistable
-joint (position-dependent damping, 1 deg), the tri-stable NES (0.5 mm) and the 3-cell Kresling
-chain (0.3 mm).
+joint (position-dependent damping, 1 deg), the tri-stable NES (0.5 mm), the 3-cell Kresling
+chain (0.3 mm) and the two non-polynomial truths of `coverage.py` (shallow arch, magnet; 0.05).
 
     python studies/errors_in_variables.py [--seeds 4] [--snr 30 40] [--out results/errors_in_variables.md]
 """
@@ -40,6 +40,8 @@ SYSTEMS = {
     "bistable joint (pos.-dep.), 1 deg": (lambda: g.systems.bistable_joint("position_dependent"), np.deg2rad(1.0)),
     "tri-stable NES, 0.5 mm": (g.systems.tristable_nes, 5e-4),
     "3-cell Kresling chain, 0.3 mm": (g.systems.kresling3, 3e-4),
+    "shallow arch, 0.05": (g.systems.shallow_arch, 0.05),
+    "magnetic oscillator, 0.05": (g.systems.magnetic_bistable, 0.05),
 }
 
 

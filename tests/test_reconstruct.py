@@ -154,3 +154,17 @@ def test_screen_truncates_the_restoring_series_from_the_top_only():
     assert np.asarray(_screen(fits, 3.0, lib).covariance)[0, 3, 3] == 1.0
     plain = np.asarray(_screen(fits, 3.0).coef)  # without the library: every term on its own
     assert plain[0, 3] == 0.0
+
+
+def test_screen_drops_an_unresolved_top_order_above_zeros():
+    """The restoring orders above the top one are zeros with zero standard error (0 >= 3 x 0):
+    they are not resolved orders, so an unresolved q^3 under them is dropped (the bug that kept
+    every fitted order under a zero)."""
+    from gmr_jax._reconstruct._reconstruct import _screen
+
+    lib = g.Library(5, 1)
+    coef = np.array([[5.0, 9.0, 4.0, 0.6, 0.0, 0.0, 0.0, 8.0, 0.0]])
+    cov = np.diag([1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0])[None]
+    fits = g.LocalFit(equilibrium=np.zeros(1), coef=coef, covariance=cov, threshold=np.zeros(1), rss=np.ones(1),
+                      n_samples=np.full(1, 100.0))
+    np.testing.assert_array_equal(np.asarray(_screen(fits, 3.0, lib).coef)[0], [5.0, 9.0, 4.0, 0, 0, 0, 0, 8.0, 0])

@@ -248,12 +248,23 @@ def _screen(fits: LocalFit, n_sigma: float, library: Library | None = None) -> L
     keep = np.abs(coef) >= n_sigma * se
     if library is not None:
         idx = library.indices(STIFFNESS)  # q^0 .. q^r
-        kept = keep[:, idx]
+        kept = keep[:, idx] & (coef[:, idx] != 0)
         top = np.max(np.where(kept, np.arange(idx.size), -1), axis=1)  # highest kept order per well
         below = np.arange(idx.size)[None, :] <= top[:, None]
         keep[:, idx] = kept | (below & (coef[:, idx] != 0))
     cov = np.where(keep[:, :, None] & keep[:, None, :], cov, 0.0)
     return eqx.tree_at(lambda f: (f.coef, f.covariance), fits, (np.where(keep, coef, 0.0), cov))
+
+
+def _under_top_order(coef: np.ndarray, library: Library) -> np.ndarray:
+    """(wells, terms): the restoring orders under each well's highest nonzero one (`_screen` keeps
+    them whatever their t)."""
+    idx = library.indices(STIFFNESS)
+    c = np.asarray(coef)[:, idx] != 0
+    top = np.max(np.where(c, np.arange(idx.size), -1), axis=1)
+    out = np.zeros(np.asarray(coef).shape, bool)
+    out[:, idx] = np.arange(idx.size)[None, :] < top[:, None]
+    return out
 
 
 def _set_well(fits: LocalFit, k: int, new: LocalFit) -> LocalFit:
@@ -881,7 +892,8 @@ def reconstruct(
         swing, swung = _sanity.check_swings(i, names, xcol, labels, eq, local_k)
         warnings += swing + _sanity.check_amplitude(i, names, xcol, labels, eq, skip=swung)
         well_names = [", ".join(names[k] for k in grp) for grp in groups]
-        warnings += _sanity.check_significance(i, well_names, library.names(), coef, local_se)
+        warnings += _sanity.check_significance(i, well_names, library.names(), coef, local_se,
+                                               _under_top_order(coef, library) if screen_sigma is not None else None)
         amps = [max(_sanity.vibration_amplitude(xcol[k]) for k in grp) for grp in groups]
         warnings += _sanity.check_global_shape(i, np.asarray(g.stiffness), eq, amps,
                                                local_k if k1 is not None else np.zeros(len(groups)))

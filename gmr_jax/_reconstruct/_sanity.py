@@ -408,7 +408,7 @@ def check_determination(dof: int, stiffness, covariance, x_lo: float, x_hi: floa
     ]
 
 
-def check_significance(dof: int, wells, term_names, coef, stderr) -> list[str]:
+def check_significance(dof: int, wells, term_names, coef, stderr, exempt=None) -> list[str]:
     """Rule 8: a local term kept by STLS should be significant: |coefficient| >= `MIN_T` (2)
     standard errors. The Hermite coordination takes every local coefficient as exact, so an
     insignificant high-order term raises the global degree and distorts the model.
@@ -416,12 +416,16 @@ def check_significance(dof: int, wells, term_names, coef, stderr) -> list[str]:
     (clean data: smallest kept ratio 3.06), so this fires only with the screen lowered or off
     (the NES with `screen_sigma=None`: x v kept at 0.1-1.1 standard errors in every well).
 
-    `wells`: per well, a label (its recordings); `coef`, `stderr`: (wells, terms)."""
+    `wells`: per well, a label (its recordings); `coef`, `stderr`: (wells, terms); `exempt`
+    (wells, terms): terms kept on purpose whatever their t (the screen keeps a restoring order
+    under a resolved higher one: its zero would be taken as exact, its covariance carries it)."""
     out = []
     coef, se = np.asarray(coef, float), np.asarray(stderr, float)
+    exempt = np.zeros(coef.shape, bool) if exempt is None else np.asarray(exempt, bool)
     for k, label in enumerate(wells):
         bad = [(term_names[j], coef[k, j], se[k, j]) for j in range(coef.shape[1])
-               if coef[k, j] != 0 and np.isfinite(se[k, j]) and abs(coef[k, j]) < MIN_T * se[k, j]]
+               if coef[k, j] != 0 and np.isfinite(se[k, j]) and abs(coef[k, j]) < MIN_T * se[k, j]
+               and not exempt[k, j]]
         if bad:
             out.append(
                 f"DOF {dof}, well of {label}: kept term(s) not significant (below {MIN_T:g} standard errors): "
