@@ -65,7 +65,9 @@ def format_shared_design(design: list[dict]) -> list[str]:
             out.append(f"    DOF {i}: on its own ({r['why']})")
         law = r.get("law") if isinstance(r.get("law"), dict) else None
         if law and "sd_after" in law:
-            out.append(f"    DOF {i}: law between the wells pooled with the design's (cells {law.get('cells')}): "
+            tau_l = law.get("tau")
+            spread = "" if tau_l is None else f", laws {100 * float(tau_l):.2g} % apart"
+            out.append(f"    DOF {i}: law between the wells pooled with the design's (cells {law.get('cells')}{spread}): "
                        f"sd {100 * float(law['sd_before']):.2g} -> {100 * float(law['sd_after']):.2g} % of "
                        f"F'(well) x span, chi2 {float(law['chi2']):.2g} on {law.get('nodes')} nodes")
     return out

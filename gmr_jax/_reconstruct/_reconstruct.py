@@ -928,7 +928,10 @@ def reconstruct(
                "paper_route_rejected": why, "shared_design": _design_stats(design, i, borrowed, design_why, coord),
                "escapes": _sanity.escapes(np.asarray(g.stiffness), eq)},
         ))
-    if shared_design and d > 1:  # cells of one design: the law between the wells, pooled (`_design_law`)
+    # cells of one design: the law between the wells, pooled (`_design_law`), unless the local ratios
+    # already showed the cells to be of different designs
+    other_designs = design is not None and design["tau"] is not None and design["tau"] > _shape_prior.TAU_MAX
+    if shared_design and d > 1 and not other_designs:
         say("cells of one design: their laws between the wells pooled")
         _pool_laws(stiff, vdamp, pdamp, covs, reports, recs)
     say("training scores, sanity checks, resolution report")
