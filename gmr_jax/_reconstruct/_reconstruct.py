@@ -12,7 +12,7 @@ import numpy as np
 from .._coordination._coordinate import GlobalCoefficients, coordinate, split_flat
 from .._coordination._discrepancy import add_discrepancy, calibrate_covariance
 from .._coordination._joint import CONFLICT as JOINT_CONFLICT
-from .._coordination._joint import JointSettings, damping_faults, joint_coordinate, restoring_faults
+from .._coordination._joint import JointSettings, RowFilter, damping_faults, joint_coordinate, restoring_faults, row_filter
 from .._errors import GMRInputError
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, Library
 from .._fit._local_fit import AutoThreshold, LocalFit, fit_local, with_constant
@@ -20,6 +20,7 @@ from .._fit._stls import STLS, compress, stls_qr
 from .._fit._threshold import default_thresholds, select_threshold
 from .._model._model import GlobalModel
 from .._model._predict import forces
+from .._recordings._derivatives import band_edge
 from .._recordings._recording import Recording, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
@@ -330,7 +331,8 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
     return fits, sorted(dropped)
 
 
-def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failure, noise=None, x_noise=None):
+def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failure, noise=None, x_noise=None,
+                      upto: int | None = None):
     """Raise each well's local restoring order while the next Taylor term is significant.
 
     STLS judges a term by its share of the local force, so a restoring q^(r+1) that the data
@@ -340,7 +342,8 @@ def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failur
     1 mm, seed 3: q^4 at t = 59 dropped, q^3 biased by +2.1 % (35 standard errors), restoring
     error 2.75 % against the exact-Taylor oracle's 1.68 %. Each well is refitted on its support plus
     q^(r+1) (at its own threshold, the support kept); the term stays if the refit resolves it,
-    and the next order is tried. Returns the fits and, per well, the orders added."""
+    and the next order is tried, up to q^`upto` (default: the library's restoring order). Returns
+    the fits and, per well, the orders added."""
     idx = library.indices(STIFFNESS)  # q^0 .. q^r, in order
     added, noise = [[] for _ in range(xs.shape[0])], noise or [None] * xs.shape[0]
     x_noise = x_noise or [None] * xs.shape[0]
@@ -348,7 +351,7 @@ def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failur
         while True:
             coef = np.asarray(fits.coef[k])
             top = max([j for j, c in enumerate(coef[idx]) if c != 0], default=0)
-            if top >= library.restoring_order:
+            if top >= (library.restoring_order if upto is None else min(upto, library.restoring_order)):
                 break
             mask = with_constant(coef != 0, library)
             mask[idx[top + 1]] = True
@@ -446,23 +449,37 @@ def _joint_explains_as_well(joint: Solution, paper: Solution, xs, vs, ys, w) -> 
     return True, ""
 
 
+def _derived_rows(recs, groups, i: int) -> RowFilter | None:
+    """The joint regression's row filter of DOF `i` (`row_filter`) where its wells' accelerations
+    were estimated: cut from the highest 99.5 % band edge of their x; None where the recordings'
+    sampling steps differ (the padded rows are filtered sample by sample)."""
+    members = [recs[k] for g in groups for k in g]
+    dts = np.array([r.dt for r in members])
+    if np.ptp(dts) > 1e-6 * dts.max():
+        return None
+    edge = max(band_edge(r.x[:, i], r.dt) for r in members)
+    return row_filter(float(dts[0]), edge) if edge > 0 else None
+
+
 def _joint(fits: LocalFit, xs, vs, ys, w, speed: float, restoring: Solution | None = None,
-           settings: JointSettings = JointSettings(), x_noise=None) -> Solution:
+           settings: JointSettings = JointSettings(), x_noise=None, rows: RowFilter | None = None) -> Solution:
     """The joint coordination (`joint_coordinate`) as a `Solution` like `coordinate`'s; given
     the paper route's `restoring` (a `coordinate` Solution), only the damping is refitted,
     to the force left after its restoring force. `x_noise`: per well, the variance of the noise
-    on x (None where any well has none): the regression is corrected for it."""
+    on x (None where any well has none): the regression is corrected for it. `rows`: the low-pass
+    of rows whose target holds estimated accelerations (`row_filter`)."""
     eq = np.asarray(fits.equilibrium)
     var = np.asarray(fits.rss) / np.maximum(np.asarray(fits.n_samples), 1.0)
     var = np.where(var > 0, var, np.max(var) if np.any(var > 0) else 1.0)
     if restoring is None:
         eiv = None if x_noise is None or any(v is None for v in x_noise) else np.asarray(x_noise, float)
-        stiff, vdamp, pdamp, cov, stats = joint_coordinate(xs, vs, ys, w, eq, var, speed, settings, x_noise=eiv)
+        stiff, vdamp, pdamp, cov, stats = joint_coordinate(xs, vs, ys, w, eq, var, speed, settings, x_noise=eiv,
+                                                           rows=rows)
     else:
         stiff = np.asarray(restoring.value.stiffness)
         ys = np.asarray(ys) - np.polynomial.polynomial.polyval(np.asarray(xs), stiff)
         settings = JointSettings(log_lambdas=(0.0,), damping_only=True)
-        _, vdamp, pdamp, cov_j, stats = joint_coordinate(xs, vs, ys, w, eq, var, speed, settings)
+        _, vdamp, pdamp, cov_j, stats = joint_coordinate(xs, vs, ys, w, eq, var, speed, settings, rows=rows)
         nk, nj = stiff.shape[0], cov_j.shape[0] - (settings.max_degree + 1)
         cov = np.zeros((nk + nj, nk + nj))
         cov[:nk, :nk] = np.asarray(restoring.aux)[:nk, :nk]
@@ -523,7 +540,7 @@ def _calibrated(coord: Solution, fits: LocalFit, library: Library, route: str, p
 
 
 def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordination: str, mass: float, i: int,
-                    odd_only: bool = False, x_noise=None):
+                    odd_only: bool = False, x_noise=None, rows: RowFilter | None = None):
     """One DOF's coordination route (`reconstruct`'s `coordination`; "auto": the paper route, GLS,
     checked for inadmissible shapes and faults, replaced or complemented by the joint regression where
     the module's rules say so). `odd_only`: the GLS takes odd degrees only (a DOF that borrowed
@@ -536,7 +553,7 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
     energy = None if speed is None else 0.5 * float(mass) * speed**2  # the model's energy bound
     lowered = []  # a borrowed law lowered to a degree that confines (`confine_borrowed`)
     if coordination == "joint":
-        coord = _joint(fits, xs, vs, ys, w, speed, x_noise=x_noise)
+        coord = _joint(fits, xs, vs, ys, w, speed, x_noise=x_noise, rows=rows)
     else:
         coord = jax.device_get(coordinate(fits, library, method="gls" if coordination == "auto" else coordination,
                                           confining=odd_only, throw=False))
@@ -550,7 +567,7 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
             paper = coord
             paper_sound = not faults["data"]
             if faults["data"]:
-                coord, route = _joint(fits, xs, vs, ys, w, speed, x_noise=x_noise), "joint"
+                coord, route = _joint(fits, xs, vs, ys, w, speed, x_noise=x_noise, rows=rows), "joint"
             else:
                 # A restoring shape that is inadmissible (even degree, turning outward, extra sign changes)
                 # is the paper's verdict only where redundant local data test it (the over-determined GLS:
@@ -581,14 +598,15 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                                  f"({energy:.3g}) reaches an escape"]
                     unconfirmed = False
                 if unconfirmed:
-                    cand = _joint(fits, xs, vs, ys, w, speed, settings=_replacement_settings(paper), x_noise=x_noise)
+                    cand = _joint(fits, xs, vs, ys, w, speed, settings=_replacement_settings(paper), x_noise=x_noise,
+                                  rows=rows)
                     ok, reason = _joint_explains_as_well(cand, paper, xs, vs, ys, w)
                     if ok:
                         coord, route = cand, "joint"
                     else:
                         why = why + [f"kept: {reason}"]
                 if route == "gls" and faults["damping"]:
-                    coord, route = _joint(fits, xs, vs, ys, w, speed, restoring=paper), "gls + joint damping"
+                    coord, route = _joint(fits, xs, vs, ys, w, speed, restoring=paper, rows=rows), "gls + joint damping"
                 if route != "joint" and unconfirmed:
                     warnings += _sanity.check_escape_reach(i, np.asarray(paper.value.stiffness),
                                                            np.asarray(fits.equilibrium), energy)
@@ -747,7 +765,9 @@ def reconstruct(
       (torque-free Kresling, deployed well: a dropped q^4 at t = 59 biased q^3 by 2 %). Default
       (None): on when every recording carries measured accelerations (as
       `keep_restoring_order`: with a estimated, a higher order absorbs the differentiation
-      filter's gain error).
+      filter's gain error); with a estimated and `structured_noise`, on up to q^2 only (the
+      curvature; at 60 dB x only the next order took the Savitzky-Golay bias for a q^3 and the
+      paper route's degree-7 law was 1650 % off).
 
     - `shared_design`: with several DOFs, cells of one design (the same wells at the same
       relative positions, Taylor ratios that agree across cells: `_shape_prior`) lend the
@@ -766,8 +786,16 @@ def reconstruct(
       the sandwich with the noise's structure (the sensor noise through the differentiation
       filter, from the channels' noise floors; `_fit/_target_noise.py`), not OLS, which takes
       that noise as white and overstated the errors 2-25 times (F'' at 60 dB: se 12-24 % against
-      a scatter of 2-3 %). Not the default yet: the route rules downstream were tuned on the OLS
-      errors and the correlated noise. With it, a 10 Hz single-tone x-only record of the
+      a scatter of 2-3 %). With it, each well's restoring series is also extended while the next
+      order is resolved, up to the curvature q^2 (`extend_restoring`), and the joint regression
+      runs on rows low-passed at 1.5 x the band edge and decimated to their Nyquist rate
+      (`_coordination/_joint.row_filter`: the equation holds for any filter applied to both
+      sides; the raw rows' noise is not white and their BIC chose the cubic). Shallow arch, x
+      only, 0.45 % excitation: 1.3-3.3 % restoring error from noise-free to 30 dB (the curvature
+      oracle 2.6 %; by default 8.3-15.7 %); magnetic bistable, x only: 18.5-20.8 % down to 45 dB
+      (oracle 20.8 %; default 45-56 %), at 30 dB unchanged (45 %); v only unchanged
+      (results/derived_accelerations.md). Not the default yet: the route rules downstream were
+      tuned on the OLS errors and the correlated noise. With it, a 10 Hz single-tone x-only record of the
       bistable joint keeps spurious local terms that now pass the 3-sigma screen, and its
       11th-degree law that blows up between the wells is no longer rejected (the raw-row R² that
       rejected it came from the correlated noise); the arch at base amplitude 0.01 falls from the
@@ -810,15 +838,16 @@ def reconstruct(
     measured = all(r.a is not None and "a" not in r.derived for r in recordings)
     if keep_restoring_order is None:
         keep_restoring_order = 3 if measured else 1
-    if extend_restoring is None:
-        extend_restoring = measured
+    extend_upto = None
+    if extend_restoring is None:  # estimated accelerations with their noise's structure: up to the curvature
+        extend_restoring, extend_upto = (True, None) if measured else (structured_noise, 2)
     recs, masses, topology, warnings = _resolve(recordings, masses, topology, exclude_center=structured_noise)
     d = recs[0].n_dof
     wells = [_wells(recs, i, well_tol) for i in range(d)]  # refusals before any fit
     targets = [regression_targets(r, masses, topology) for r in recs]
     stiff, vdamp, pdamp, se_s, se_v, se_p, covs, reports = [], [], [], [], [], [], [], []
     k1 = library.terms().index((STIFFNESS, 1)) if library.restoring_order >= 1 else None
-    local, noises, x_noises = [], [], []
+    local, noises, x_noises, row_filters = [], [], [], []
     for i in range(d):
         _, labels, groups = wells[i]
         xs, w = _pad_stack([[recs[k].x[:, i] for k in g] for g in groups])
@@ -848,8 +877,9 @@ def reconstruct(
         added = [[] for _ in groups]
         if extend_restoring and screen_sigma is not None:
             fits, added = _extend_restoring(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure, noise,
-                                            x_noise)
+                                            x_noise, extend_upto)
         local.append((labels, groups, xs, vs, ys, w, fits, dropped, added, eiv))
+        row_filters.append(_derived_rows(recs, groups, i) if any(n is not None for n in noise) else None)
         noises.append(noise)
         x_noises.append(x_noise)
     # cells of one design: the well-excited cells lend the curvature the weakly excited ones miss
@@ -868,7 +898,7 @@ def reconstruct(
         say(f"{f'DOF {i} ({i + 1}/{d}): ' if d > 1 else ''}coordination ({coordination})")
         coord, route, why, paper_sound, confining, found = _coordinate_dof(
             fits, xs, vs, ys, w, library, coordination, float(masses[i]), i, odd_only=any(borrowed),
-            x_noise=x_noises[i])
+            x_noise=x_noises[i], rows=row_filters[i])
         if any(borrowed) and route == "joint":
             # the law with the borrowed orders was inadmissible and the joint regression (which sees
             # only this cell's data) would replace it: the cell goes on alone (torque-free Kresling,
@@ -876,7 +906,8 @@ def reconstruct(
             design_why = "the borrowed orders gave an inadmissible law: " + "; ".join(why[:1])
             fits, borrowed = data_fits, []
             coord, route, why, paper_sound, confining, found = _coordinate_dof(
-                fits, xs, vs, ys, w, library, coordination, float(masses[i]), i, x_noise=x_noises[i])
+                fits, xs, vs, ys, w, library, coordination, float(masses[i]), i, x_noise=x_noises[i],
+                rows=row_filters[i])
         warnings += found
         if coord.result != RESULTS.successful:
             failure.note(coord.result, f"DOF {i}: coordination of the equilibria "
