@@ -51,6 +51,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._fit._errors_in_variables import hermite_excess
 from .._fit._householder import inverse_logdet
 from ._hermite import monomial_map
 
@@ -156,13 +157,8 @@ def _corrected(gram, rhs, u, vs, ys, w, s2u, layout: _Layout, scale):
     fac = np.concatenate([np.ones(u.shape + (k + 1,)), np.repeat(vs[..., None], j + 1, axis=-1),
                           np.stack([np.sign(vs) * np.abs(vs) ** o for o in layout.vel], axis=-1)
                           .reshape(vs.shape + (len(layout.vel),))], axis=-1) / scale
-    # q^n - He_n(q; s²) per well (rows), recurrences as `hermite_excess`
-    s2 = np.asarray(s2u, float).reshape(-1, 1)
-    he, dd = [np.ones_like(u), u], [np.zeros_like(u), np.zeros_like(u)]
-    for m in range(1, n_max):
-        he.append(u * he[m] - m * s2 * he[m - 1])
-        dd.append(u * dd[m] + m * s2 * he[m - 1])
-    dq = np.stack(dd[: n_max + 1], axis=-1)  # (wells, samples, n)
+    s2 = jnp.asarray(np.asarray(s2u, float).reshape(-1, 1))  # per well (rows)
+    dq = np.asarray(hermite_excess(jnp.asarray(u), s2, n_max))  # u^n - He_n(u; s²): (wells, samples, n)
     conv = np.zeros((layout.p, layout.p, 2 * n_max + 1))
     for a in range(n_max + 1):
         for b in range(n_max + 1):

@@ -166,8 +166,7 @@ def coefficient_covariance(qr: QRData, coef, support) -> Float[Array, "terms ter
     derivative, `fit_local(..., noise=)` uses the noise's structure instead (`_target_noise`)."""
     norms = jnp.where(column_norms(qr) > 0, column_norms(qr), 1.0)
     rn = jnp.where(support[None, :], qr.r / norms[None, :], 0.0)
-    resid = qr.r @ coef - qr.z
-    rss = jnp.maximum(qr.yy - jnp.sum(qr.z**2), 0.0) + jnp.sum(resid**2)
+    rss = residual_sum_of_squares(qr, coef)
     k = jnp.sum(support)
     sigma2 = rss / jnp.maximum(qr.n - k, 1.0)
     return sigma2 * support_inverse(rn.T @ rn, support) / (norms[:, None] * norms[None, :])

@@ -15,11 +15,17 @@ def channel_variance(signal: np.ndarray, dt: float) -> float:
     of white noise of variance s² is 2 s² dt). The mean, not the median: a periodogram's median
     is ln 2 of its mean where few segments are averaged (a 3000-sample record: the noise 28 %
     low, the standard errors half the scatter)."""
+    f, p = _welch(signal, dt)
+    return float(np.mean(p[f >= 0.8 * f[-1]])) / (2.0 * dt)
+
+
+def _welch(signal: np.ndarray, dt: float):
+    """(f, p): the Welch spectrum of the signal, mean removed, segments of up to 256 samples
+    (`channel_variance`, `white_floor`)."""
     from scipy.signal import welch
 
     sig = np.asarray(signal, float)
-    f, p = welch(sig - np.mean(sig), fs=1.0 / dt, nperseg=int(min(sig.size, 256)))
-    return float(np.mean(p[f >= 0.8 * f[-1]])) / (2.0 * dt)
+    return welch(sig - np.mean(sig), fs=1.0 / dt, nperseg=int(min(sig.size, 256)))
 
 
 def _response(topology, masses: np.ndarray, d: int, i: int):
@@ -71,8 +77,6 @@ def well_noise(recs, group: list[int], i: int, masses: np.ndarray, topology) -> 
                        white=jnp.asarray(white, float))
 
 
-
-
 def x_noise_variance(recs, group: list[int], i: int) -> float | None:
     """The variance of the white noise on DOF `i`'s measured displacement at one well (the
     recordings `group`; each channel's Welch floor, `channel_variance`, pooled by samples), for
@@ -104,12 +108,10 @@ def white_floor(signal: np.ndarray, dt: float) -> float | None:
     the top fifth of the band and over 0.4-0.6 of it within a factor `FLAT` (white noise: 1
     within its scatter; a response whose spectrum still falls there, or an anti-aliasing filter's
     roll-off, fails it, and the noise of x is then not known well enough to correct for)."""
-    from scipy.signal import welch
-
     sig = np.asarray(signal, float)
     if sig.size < 64 or not np.all(np.isfinite(sig)):
         return None
-    f, p = welch(sig - np.mean(sig), fs=1.0 / dt, nperseg=int(min(sig.size, 256)))
+    f, p = _welch(sig, dt)
     top, below = float(np.mean(p[f >= 0.8 * f[-1]])), float(np.mean(p[(f >= 0.4 * f[-1]) & (f < 0.6 * f[-1])]))
     if not (top > 0 and below > 0) or max(top / below, below / top) > FLAT:
         return None
