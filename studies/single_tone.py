@@ -32,6 +32,7 @@ CROSS = dict(amplitude=0.5, frequency=0.5, duration=120.0)
 CASES = (("x", 50), ("x", 30), ("v", 50), ("v", 30), ("xva", 50))
 METHODS = {
     "default": lambda r: gj.reconstruct(r, throw=False),
+    "structured noise": lambda r: gj.reconstruct(r, structured_noise=True, throw=False),
     "paper gls": lambda r: gj.reconstruct(r, coordination="gls", throw=False),
     "paper hermite": lambda r: gj.reconstruct(r, coordination="hermite", throw=False),
     "GMC-SINDy": lambda r: gj.gmc_sindy(r, throw=False),
@@ -138,16 +139,20 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--out", default="results/single_tone.md")
+    ap.add_argument("--methods", nargs="*", default=list(METHODS), choices=list(METHODS))
+    ap.add_argument("--cases", nargs="*", default=None, help="sensing:SNR, e.g. x:50 v:30")
     args = ap.parse_args()
     cross = cross_record()
     true_rate = hops(cross[1]) / CROSS["duration"]
     rows = []
     t_start = time.time()
-    for sensing, snr in CASES:
+    cases = CASES if args.cases is None else [(c.split(":")[0], int(c.split(":")[1])) for c in args.cases]
+    for sensing, snr in cases:
         for seed in range(args.seeds):
             recs = tone_recordings(sensing, snr, seed)
             amp = np.mean([np.percentile(np.abs(r.x[:, 0] - r.x[:, 0].mean()), 99.9) for r in recs])
-            for name, fn in METHODS.items():
+            for name in args.methods:
+                fn = METHODS[name]
                 t0 = time.time()
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")

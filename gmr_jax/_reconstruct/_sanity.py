@@ -555,18 +555,32 @@ def check_global_shape(dof: int, stiffness, equilibria, amplitudes, local_stiffn
                 f"below the energy differences inside the recorded range ({_g(depth)}): a motion that leaves the "
                 f"recorded range [{_g(lo)}, {_g(hi)}] runs away; lower the orders, or record further out"
             )
-    inner = np.linspace(eq.min(), eq.max(), 401)
-    force = np.abs(np.polynomial.polynomial.polyval(inner, s))
-    scale = float(np.max(np.abs(local_stiffness))) * float(np.ptp(eq))
-    if scale > 0 and force.max() > BLOWUP_RATIO * scale:
+    b = blowup(s, eq, local_stiffness)
+    if b is not None:
         out.append(
-            f"DOF {dof}: between the recorded equilibria the restoring force reaches {_g(force.max())} (at x = "
-            f"{_g(inner[np.argmax(force)])}), {force.max() / scale:.3g} times the largest measured local stiffness "
-            f"times their distance ({_g(scale)}): the global polynomial blew up between the wells (local high-order "
+            f"DOF {dof}: between the recorded equilibria the restoring force reaches {_g(b['force'])} (at x = "
+            f"{_g(b['x'])}), {b['ratio']:.3g} times the largest measured local stiffness "
+            f"times their distance ({_g(b['scale'])}): the global polynomial blew up between the wells (local high-order "
             f"terms from records that cannot fix them, e.g. near-sinusoidal ones); lower the orders (-r), or excite "
             f"over a band of frequencies"
         )
     return out
+
+
+def blowup(stiffness, equilibria, local_stiffness) -> dict | None:
+    """Rule 9 (c): where |F| between the outermost equilibria exceeds `BLOWUP_RATIO` times the
+    largest local stiffness (|F'| per well) times their distance, the peak (`force`, at `x`),
+    `scale` and `ratio`; None where it does not (or cannot be judged)."""
+    s, eq = np.asarray(stiffness, float), np.asarray(equilibria, float)
+    if eq.size < 2 or not np.all(np.isfinite(s)):
+        return None
+    inner = np.linspace(eq.min(), eq.max(), 401)
+    force = np.abs(np.polynomial.polynomial.polyval(inner, s))
+    scale = float(np.max(np.abs(np.asarray(local_stiffness, float)))) * float(np.ptp(eq))
+    if not (np.isfinite(scale) and scale > 0 and force.max() > BLOWUP_RATIO * scale):
+        return None
+    return {"force": float(force.max()), "x": float(inner[np.argmax(force)]), "scale": scale,
+            "ratio": float(force.max() / scale)}
 
 
 #: Rule 12: the data-preferred law differs from the chosen one by more than this many times the chosen
