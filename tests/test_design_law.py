@@ -104,3 +104,31 @@ def test_kresling_torque_free_weak_cells_take_the_design():
         model = np.polynomial.polynomial.polyval(xs, np.asarray(sol.value.stiffness[i]))
         assert np.linalg.norm(model - truth) / np.linalg.norm(truth) < 0.03, i
         assert "law" in sol.stats["dofs"][i].stats["shared_design"]
+
+
+def test_laws_that_already_turn_outward_still_pool():
+    """Admissibility is compared by kind: cells whose quintic laws all turn outward far out (a
+    negative leading term, kept where no motion reaches the escape) pool as the others do; only a
+    fault the law did not have excludes it (3-cell Kresling at 30 dB: every cell's law turned
+    outward, each with its own leading term, and the differing messages had excluded them all)."""
+    h = P.polymul(P.polyfromroots([0.0, 0.4, 1.0]), [1.0, 0.0, -0.2])  # leading -0.2 u^5, roots of 1 - 0.2 u^2 far out
+
+    wide = P.polyadd(BUMP, P.polymul([0, 1], BUMP))  # x^2 (x - 1)^2 (1 + x): reaches the leading term
+
+    def cell(scale, bump):
+        law = scale * h
+        law[:6] += bump * scale * wide
+        b = np.zeros(8)
+        b[:6] = scale * wide
+        return np.concatenate([law, [0.3, 0.3]]), (1e-6 * scale) ** 2 * np.eye(8) + 0.05**2 * np.outer(b, b)
+
+    cells = [cell(s, bump) for s, bump in ((1.0, 0.04), (1.5, -0.03), (2.0, 0.01))]
+    flats, covs = [c[0] for c in cells], [c[1] for c in cells]
+    out, _, summary = pool_design_laws(flats, [6] * 3, covs, [_region()] * 3)
+    assert summary["members"] == [0, 1, 2] and sorted(summary["per_dof"]) == [0, 1, 2], summary["excluded"]
+    for k, (s, _) in enumerate(((1.0, 0), (1.5, 0), (2.0, 0))):
+        u = np.linspace(0, 1, 201)
+        assert out[k][5] < 0 and out[k][5] != flats[k][5]  # still turning outward, its own leading term moved
+        before = np.max(np.abs(P.polyval(u, flats[k][:6]) - s * P.polyval(u, h))) / s
+        after = np.max(np.abs(P.polyval(u, out[k][:6]) - s * P.polyval(u, h))) / s
+        assert after < before

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import gmr_jax as g
-from gmr_jax._coordination._joint import JointSettings, inadmissible, joint_coordinate
+from gmr_jax._coordination._joint import JointSettings, inadmissible, joint_coordinate, restoring_fault_kinds
 
 
 def _samples(f, c, wells=(-1.0, 1.0), amp=0.05, n=3000, noise=1e-3, seed=0):
@@ -56,6 +56,11 @@ def test_inadmissible_names_each_failure():
     assert any("even degree 4" in r for r in even)
     spurious = np.polynomial.polynomial.polyfromroots([-1.8, -1.4, -1, 0, 1, 1.4, 1.8])  # wells at +-1.8 too
     assert any("changes sign 7 times" in r for r in inadmissible(spurious, [0, 0.1], [0], eq, 3.0))
+    # the same faults by kind (what pooled laws are compared by, `_design_law`)
+    assert restoring_fault_kinds([0, -1, 0, 1], eq) == {}
+    assert restoring_fault_kinds(spurious, eq) == {"sign": 7}
+    assert restoring_fault_kinds([0, -1, 0, 1.2, 0, -0.1], eq) == {"outward": 1}
+    assert restoring_fault_kinds([0, -1, 0.2, 1, 0.5], eq).keys() >= {"even"}
     assert any("no damping" in r for r in inadmissible([0, -1, 0, 1], [0, 0], [0], eq, 3.0))
     # C(x) v with C = 0.1 - 0.2 x^2 goes negative beyond |x| = 0.71
     assert any("feeds energy in" in r for r in inadmissible([0, -1, 0, 1], [0, 0.1], [0, 0, -0.2], eq, 3.0))

@@ -465,6 +465,16 @@ def restoring_faults(stiffness, equilibria) -> list[str]:
     sign exactly 2n - 1 times over the span it is used on, the equilibria widened by half their
     span on each side (its n wells and the saddles between them: no other well). Monomial
     coefficients in x, as `GlobalModel` holds them."""
+    return [msg for _, msg in _restoring_faults(stiffness, equilibria)]
+
+
+def restoring_fault_kinds(stiffness, equilibria) -> dict[str, int]:
+    """`restoring_faults` by kind, for comparing two laws: "even" (even degree), "outward"
+    (negative leading coefficient), "sign" (the number of sign changes, where it is wrong)."""
+    return dict(kind for kind, _ in _restoring_faults(stiffness, equilibria))
+
+
+def _restoring_faults(stiffness, equilibria) -> list[tuple[tuple[str, int], str]]:
     eq = np.asarray(equilibria, float)
     lo, hi = float(eq.min()), float(eq.max())
     half = 0.5 * (hi - lo)
@@ -473,16 +483,18 @@ def restoring_faults(stiffness, equilibria) -> list[str]:
     out = []
     coef = np.trim_zeros(np.asarray(stiffness, float), "b")
     if coef.size % 2 == 1 and coef.size > 1:  # even degree: F has one sign at both ends
-        out.append(f"its restoring force has even degree {coef.size - 1}, so it cannot confine on both sides "
-                   f"(F -> {'+' if coef[-1] > 0 else '-'}inf as x -> ±inf)")
+        out.append((("even", 1), f"its restoring force has even degree {coef.size - 1}, so it cannot confine on both "
+                                 f"sides (F -> {'+' if coef[-1] > 0 else '-'}inf as x -> ±inf)"))
     elif coef.size > 1 and coef[-1] < 0:
-        out.append(f"its restoring force turns outward far out (leading term {coef[-1]:.4g} x^{coef.size - 1}: "
-                   f"F -> -inf as x -> +inf): a motion that leaves the recorded range escapes")
+        out.append((("outward", 1), f"its restoring force turns outward far out (leading term {coef[-1]:.4g} "
+                                    f"x^{coef.size - 1}: F -> -inf as x -> +inf): a motion that leaves the recorded "
+                                    f"range escapes"))
     pos = f >= 0
     changes = int(np.sum(pos[1:] != pos[:-1]))
     if changes != 2 * eq.size - 1:
-        out.append(f"its restoring force changes sign {changes} times on [{lo - half:.4g}, {hi + half:.4g}] where "
-                   f"{eq.size} wells and the saddles between them need {2 * eq.size - 1}")
+        out.append((("sign", changes), f"its restoring force changes sign {changes} times on [{lo - half:.4g}, "
+                                       f"{hi + half:.4g}] where {eq.size} wells and the saddles between them need "
+                                       f"{2 * eq.size - 1}"))
     return out
 
 

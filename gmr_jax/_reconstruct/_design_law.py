@@ -37,7 +37,7 @@ its values against the prior and the rms standard deviation over the nodes befor
 import jax.scipy.special as jsp
 import numpy as np
 
-from .._coordination._joint import restoring_faults
+from .._coordination._joint import restoring_fault_kinds, restoring_faults
 from ._shape_prior import P_CONFLICT, POSITION_TOL, TAU_FLOOR, TAU_MAX
 
 #: Interior (and just-outside) nodes in u = (x - w_0) / L where the laws are compared and pooled.
@@ -214,9 +214,16 @@ def pool_design_laws(flats: list, n_restoring: list, covariances: list, regions:
         new_cov = covariances[j] - gain @ innov.T
         new_cov = 0.5 * (new_cov + new_cov.T)
         chi2 = float(resid @ np.linalg.solve(s, resid))
-        faults = set(restoring_faults(new[:ns], wells[j])) - set(restoring_faults(flats[j][:ns], wells[j]))
-        if faults:  # the pooled law would lose its admissibility (a leading term's sign, a sign change)
-            summary["excluded"][j] = "pooled, its law would not be admissible: " + sorted(faults)[0]
+        # the pooled law must not lose admissibility it had (a leading term's sign, a sign change): compared
+        # by kind, not by message (a law that already turned outward keeps its own, other, leading term)
+        before, after_k = restoring_fault_kinds(flats[j][:ns], wells[j]), restoring_fault_kinds(new[:ns], wells[j])
+        need = 2 * wells[j].size - 1
+        lost = [k for k, n in after_k.items()
+                if k not in before or (k == "sign" and abs(n - need) > abs(before[k] - need))]
+        if lost:
+            msgs = restoring_faults(new[:ns], wells[j])
+            summary["excluded"][j] = "pooled, its law would not be admissible: " + "; ".join(
+                m for m, (k, _) in zip(msgs, after_k.items()) if k in lost)
             continue
         out_f[j] = new
         out_c[j] = new_cov
