@@ -112,6 +112,12 @@ def _run(tree: Path, seeds: int, out: Path, part: str, reuse: bool) -> list:
     return json.loads(out.read_text())
 
 
+def _commit(tree) -> str:
+    """The short commit a checkout is at (what its rows were computed with)."""
+    return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=tree, capture_output=True,
+                          text=True).stdout.strip()
+
+
 def _stat(rows, meth, key):
     v = np.array([r[meth][key] for r in rows]) * 100
     return f"{np.median(v):.3g} % [{v.max():.3g} %]"
@@ -130,7 +136,7 @@ def table(before: list, after: list, args, secs: float, commit: str = "", worktr
         f"`python studies/paper_cases_before_after.py --before /tmp/before{' --after /tmp/after' if worktree else ''} "
         f"--seeds {seeds} --kresling-seeds {args.kresling_seeds}` ({secs / 60:.1f} min on the shared 2-core dev "
         f"machine{', rows of earlier runs reused' if args.reuse else ''}); /tmp/before is a `git worktree` of "
-        f"{BEFORE_COMMIT}, the last commit before the auto-coordination / joint-route work; 'after' is "
+        f"{_commit(args.before)}, the last commit before the auto-coordination / joint-route work; 'after' is "
         f"{commit}{' (a clean worktree of it)' if worktree else ''}.", "",
         f"Single-DOF cases, data and measures of `studies/paper_cases.py` ({seeds} noise seeds at 60 dB, median "
         f"[max]); the Kresling chains (paper Secs. 3.2 and 4) at their nominal base amplitude, per cell, "
@@ -207,8 +213,7 @@ def main():
                       args.reuse)
     assert all(r["gmr_jax"].startswith(str(Path(args.after).resolve())) for r in after)
     assert all(r["gmr_jax"].startswith(str(Path(args.before).resolve())) for r in before)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=args.after, capture_output=True,
-                            text=True).stdout.strip()
+    commit = _commit(args.after)
     text = table(before, after, args, time.time() - t0, commit, args.after != str(ROOT))
     Path(args.out).write_text(text)
     print(text)

@@ -104,7 +104,9 @@ def hops(x) -> int:
     return n
 
 
-def one_period_nrmse(model, ts, x, v, exc) -> float:
+def one_period_nrmse(model, ts, x, v, exc, measured=None) -> float:
+    """RMS error of one-period-ahead predictions of x (each from the state (x, v) at a period's
+    start) over the RMS of x; against `measured` (the recorded x) where given, else against x."""
     period = 1.0 / CROSS["frequency"]
     n_per = int(round(period * FS))
     starts = np.arange(0, len(ts) - n_per, n_per)
@@ -113,7 +115,8 @@ def one_period_nrmse(model, ts, x, v, exc) -> float:
     sims = np.asarray(jax.vmap(lambda k, t0, x0, v0: gj.simulate(model, exc, t0 + local, x0[None], v0[None],
                                                                    throw=False).value[0][:, 0])(
         jnp.asarray(starts), jnp.asarray(ts[starts]), jnp.asarray(x[starts]), jnp.asarray(v[starts])))
-    truth = np.stack([x[k:k + n_per + 1] for k in starts])
+    ref = x if measured is None else measured
+    truth = np.stack([ref[k:k + n_per + 1] for k in starts])
     err = sims - truth
     if not np.all(np.isfinite(err)):
         return float("inf")
@@ -126,13 +129,28 @@ def restoring_error(model) -> float:
     return float(jnp.linalg.norm(fm - ft) / jnp.linalg.norm(ft))
 
 
-def evaluate(model, cross):
+def measured_cross(cross, snr: float, seed: int):
+    """The unseen record as a lab has it: x and v with sensor noise at `snr` (the training
+    records' SNR), drawn independently of them."""
+    ts, x, v, exc = cross
+    rng = np.random.default_rng(10_000 + seed)
+    return ts, gj.add_noise(x, snr, rng), gj.add_noise(v, snr, rng), exc
+
+
+def evaluate(model, cross, measured=None):
+    """(restoring error, one-period NRMSE from the true states against the true x, hops per
+    second of a free run, diverged, one-period NRMSE from the measured states against the
+    measured x: None without `measured`)."""
     ts, x, v, exc = cross
     sol = gj.simulate(model, exc, jnp.asarray(ts), jnp.asarray([x[0]]), jnp.asarray([v[0]]), throw=False)
     free = np.asarray(sol.value[0])[:, 0]
     diverged = sol.result != gj.RESULTS.successful or not np.all(np.isfinite(free))
     rate = float("nan") if diverged else hops(free) / CROSS["duration"]
-    return restoring_error(model), one_period_nrmse(model, ts, x, v, exc), rate, diverged
+    on_measured = None
+    if measured is not None:
+        _, xm, vm, _ = measured
+        on_measured = one_period_nrmse(model, ts, xm, vm, exc, measured=xm)
+    return restoring_error(model), one_period_nrmse(model, ts, x, v, exc), rate, diverged, on_measured
 
 
 def main():
@@ -150,6 +168,9 @@ def main():
     for sensing, snr in cases:
         for seed in range(args.seeds):
             recs = tone_recordings(sensing, snr, seed)
+            measured = measured_cross(cross, snr, seed)
+            # the truth on the same measured record: what noise alone costs (the yardstick of "within 20 %")
+            truth_nrmse = one_period_nrmse(SYSTEM.truth, cross[0], measured[1], measured[2], cross[3], measured=measured[1])
             amp = np.mean([np.percentile(np.abs(r.x[:, 0] - r.x[:, 0].mean()), 99.9) for r in recs])
             for name in args.methods:
                 fn = METHODS[name]
@@ -162,17 +183,19 @@ def main():
                         rows.append((sensing, snr, seed, name, None, str(e)[:80]))
                         continue
                 model = sol.value
-                err, nrmse, rate, div = evaluate(model, cross)
+                err, nrmse, rate, div, nrmse_m = evaluate(model, cross, measured)
                 st = sol.stats["dofs"][0].stats if sol.stats["dofs"] else {}
                 k = np.trim_zeros(np.asarray(model.stiffness[0]), "b").size - 1
                 rows.append((sensing, snr, seed, name, dict(err=err, nrmse=nrmse, rate=rate, diverged=div, K=k,
+                                                             nrmse_measured=nrmse_m, truth_measured=truth_nrmse,
                                                              route=st.get("coordination", "-"),
                                                              warnings=len(sol.stats["warnings"]),
                                                              r2=min(min(v["r2"]) for v in sol.stats["training"].values()),
                                                              amp=amp, secs=time.time() - t0), ""))
                 r = rows[-1][4]
                 print(f"{sensing:3s} {snr} dB seed {seed} {name:13s} restoring {100 * r['err']:7.2f} %  1-period "
-                      f"NRMSE {100 * r['nrmse']:8.2f} %  hops/s {r['rate']:.3f} (truth {true_rate:.3f})  K {k}  "
+                      f"NRMSE {100 * r['nrmse']:8.2f} %  on the measured record {100 * nrmse_m:.2f} % (truth "
+                      f"{100 * truth_nrmse:.2f} %)  hops/s {r['rate']:.3f} (truth {true_rate:.3f})  K {k}  "
                       f"{r['route']}  warnings {r['warnings']}", flush=True)
     write(args.out, rows, true_rate, time.time() - t_start, args.seeds)
 
@@ -188,19 +211,27 @@ def write(path, rows, true_rate, secs, seeds):
         "v only (equilibrium given) or x, v, a. Unseen record: base sine "
         f"{CROSS['frequency']} Hz, {CROSS['amplitude']} ({CROSS['duration']:.0f} s; the truth hops "
         f"{true_rate:.3f} times per second).",
-        "Columns: restoring error over the box (relative L2); one-period-ahead output NRMSE on the unseen record; "
-        "hops per second of a free run (within 20 % of the truth's: yes/no); the global degree; the coordination the "
-        "default took; warnings printed. Oracles: the Hermite interpolant of the exact value and slope at both wells "
-        "is 14.6 % off over the box, with the curvature 2.6 %.", "",
-        "| sensing | SNR | seed | method | restoring | 1-period NRMSE | hops/s | hop rate within 20 % | K | route | warnings |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "Columns: restoring error over the box (relative L2); one-period-ahead output NRMSE on the unseen record "
+        "from its true states against its true x (the model's own error); the same on the record as measured (x and v "
+        "with sensor noise at the training SNR, each period started from the measured state, compared with the "
+        "measured x), beside the truth's on that same record, and whether the model's is within 20 % of the truth's "
+        "(the truth's is not 0 there: noise alone costs it); hops per second of a free run (within 20 % of the "
+        "truth's: yes/no); the global degree; the coordination the default took; warnings printed. Oracles: the "
+        "Hermite interpolant of the exact value and slope at both wells is 14.6 % off over the box, with the "
+        "curvature 2.6 %.", "",
+        "| sensing | SNR | seed | method | restoring | 1-period NRMSE | on the measured record (truth's) | within 20 % "
+        "| hops/s | hop rate within 20 % | K | route | warnings |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for sensing, snr, seed, name, r, msg in rows:
         if r is None:
-            lines.append(f"| {sensing} | {snr} | {seed} | {name} | refused: {msg} | | | | | | |")
+            lines.append(f"| {sensing} | {snr} | {seed} | {name} | refused: {msg} | | | | | | | | |")
             continue
         ok = "diverged" if r["diverged"] else ("yes" if abs(r["rate"] - true_rate) <= 0.2 * true_rate else "no")
+        m, t = r["nrmse_measured"], r["truth_measured"]
+        ok_m = "yes" if m <= 1.2 * t else "no"
         lines.append(f"| {sensing} | {snr} | {seed} | {name} | {100 * r['err']:.2f} % | {100 * r['nrmse']:.2f} % | "
+                     f"{100 * m:.2f} % ({100 * t:.2f} %) | {ok_m} | "
                      f"{r['rate']:.3f} | {ok} | {r['K']} | {r['route']} | {r['warnings']} |")
     with open(path, "w") as fh:
         fh.write("\n".join(lines) + "\n")

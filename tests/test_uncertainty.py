@@ -153,6 +153,11 @@ def test_bad_band_arguments():
         g.force_band(m, jnp.zeros(2), part="inertia")
     with pytest.raises(g.GMRInputError, match="needs the velocities"):
         g.force_band(m, jnp.zeros(2), part="damping")
+    # a grid (or a scalar) where one point is taken: named, with the vmap that does it
+    with pytest.raises(g.GMRInputError, match=r"x must have shape \(2,\).*got shape \(7, 2\).*jax.vmap"):
+        g.force_band(m, jnp.zeros((7, 2)))
+    with pytest.raises(g.GMRInputError, match=r"v must have shape \(2,\).*got shape \(\)"):
+        g.force_band(m, jnp.zeros(2), 0.0, part="damping")
     with pytest.raises(g.GMRInputError, match="n must be"):
         g.sample_models(m, jax.random.key(0), 0)
 
