@@ -425,15 +425,15 @@ def _well_r2(g: GlobalCoefficients, xs, vs, ys, w) -> np.ndarray:
 def _paper_route_faults(coord: Solution, fits: LocalFit, xs, vs, ys, w, speed: float,
                         library: Library) -> dict[str, list[str]]:
     """Why the paper's coordination of one DOF is not to be used, by kind: "data" (it failed,
-    or it explains a well's own data poorly: R^2 < `MIN_R2`, or it blows up between the wells:
-    `_sanity.blowup`), "damping" (`damping_faults`),
+    or it explains a well's own data poorly: R^2 < `MIN_R2`), "blowup" (it blows up between the
+    wells: `_sanity.blowup`), "damping" (`damping_faults`),
     "restoring" (`restoring_faults`); empty lists where it is fine."""
     if coord.result != RESULTS.successful:
-        return {"data": [RESULTS[coord.result]], "damping": [], "restoring": []}
+        return {"data": [RESULTS[coord.result]], "damping": [], "restoring": [], "blowup": []}
     g = coord.value
     eq = np.asarray(fits.equilibrium)
     faults = {"data": [], "damping": damping_faults(g.velocity_damping, g.position_damping, eq, speed),
-              "restoring": restoring_faults(g.stiffness, eq)}
+              "restoring": restoring_faults(g.stiffness, eq), "blowup": []}
     for x0, r2 in zip(eq, _well_r2(g, xs, vs, ys, w)):
         if not r2 >= _sanity.MIN_R2:
             faults["data"].append(f"it explains the data of the well at x = {float(x0):.4g} poorly (R² {r2:.3g})")
@@ -444,7 +444,7 @@ def _paper_route_faults(coord: Solution, fits: LocalFit, xs, vs, ys, w, speed: f
     k1 = terms.index((STIFFNESS, 1)) if (STIFFNESS, 1) in terms else None
     b = None if k1 is None else _sanity.blowup(g.stiffness, eq, np.asarray(fits.coef)[:, k1])
     if b is not None:
-        faults["data"].append(f"it blows up between the wells (|F| reaches {b['force']:.4g} at x = {b['x']:.4g}, "
+        faults["blowup"].append(f"it blows up between the wells (|F| reaches {b['force']:.4g} at x = {b['x']:.4g}, "
                               f"{b['ratio']:.3g} times the largest local stiffness times the wells' distance)")
     return faults
 
@@ -576,11 +576,14 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
             lowered = lowered + risk_notes
         if coordination == "auto":
             faults = _paper_route_faults(coord, fits, xs, vs, ys, w, speed, library)
-            why = faults["restoring"] + faults["damping"] + faults["data"]
+            why = faults["restoring"] + faults["damping"] + faults["data"] + faults["blowup"]
             paper = coord
             paper_sound = not faults["data"]
             if faults["data"]:
                 coord, route = _joint(fits, xs, vs, ys, w, speed, x_noise=x_noise, rows=rows), "joint"
+            elif faults["blowup"]:  # it explains the wells' data, its shape between them is the fault
+                coord, route = _joint(fits, xs, vs, ys, w, speed, settings=_replacement_settings(paper),
+                                      x_noise=x_noise, rows=rows), "joint"
             else:
                 # A restoring shape that is inadmissible (even degree, turning outward, extra sign changes)
                 # is the paper's verdict only where redundant local data test it (the over-determined GLS:
