@@ -80,3 +80,22 @@ def test_reconstruct_from_velocity_only_keeps_the_curvature(arch_v):
     model = np.polynomial.polynomial.polyval(xs, np.asarray(sol.value.stiffness[0]))
     err = np.linalg.norm(model - truth) / np.linalg.norm(truth)
     assert err < 0.1, err  # measured 7.2 %
+
+
+def test_a_csv_column_repeating_the_equilibrium_is_taken_as_it(tmp_path):
+    """A CSV has no scalars: a lab writes the rest position as a column. A constant column mapped
+    to `equilibrium` is that number; a varying one is refused in one short line (it printed every
+    sample before)."""
+    t = np.arange(2000) / 100.0
+    v = 0.01 * np.sin(2 * np.pi * 1.3 * t) + 0.004 * np.sin(2 * np.pi * 2.9 * t)
+    path = tmp_path / "laser.csv"
+    rows = ["time_s,vel,rest"] + [f"{a:.5f},{b:.8f},{-1.09}" for a, b in zip(t, v)]
+    path.write_text("\n".join(rows) + "\n")
+    rec = g.load_recording(path, columns={"t": "time_s", "v": "vel", "equilibrium": "rest"})
+    np.testing.assert_allclose(rec.equilibrium, [-1.09])
+    assert abs(np.mean(rec.x) + 1.09) < 1e-12  # the integrated x placed there
+    rows = ["time_s,vel,rest"] + [f"{a:.5f},{b:.8f},{a:.5f}" for a, b in zip(t, v)]
+    path.write_text("\n".join(rows) + "\n")
+    with pytest.raises(g.GMRInputError, match="varies over the record") as err:
+        g.load_recording(path, columns={"t": "time_s", "v": "vel", "equilibrium": "rest"})
+    assert len(str(err.value)) < 300

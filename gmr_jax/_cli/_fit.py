@@ -172,8 +172,8 @@ def run(args) -> int:
         print(str(st["resolution"]))
     for line in format_eiv(routes):
         print(line)
-    if any(r.v is None or r.a is None for r in recs):
-        print("  note: velocities/accelerations were estimated from x (Savitzky-Golay, see README)")
+    for line in _derivation_notes(recs):
+        print(line)
     if masses is None and all(r.masses is None for r in recs):
         print("  note: no masses in the recordings and no --masses: each taken as 1, so every coefficient is a force "
               "per unit mass (pass --masses M0,M1,... for forces in the recordings' units)")
@@ -195,3 +195,17 @@ def run(args) -> int:
         return 3
     stage("done")
     return 0
+
+
+def _derivation_notes(recs) -> list[str]:
+    """What was estimated rather than measured, by source (a note per kind of recording)."""
+    notes = []
+    integrated = [r for r in recs if "x" in r.derived and r.integration]
+    if integrated:
+        srcs = sorted({r.integration.get("from", "?") for r in integrated})
+        notes.append(f"  note: x was integrated from {' and '.join(srcs)} (drift below the cut-off removed, the slow shift of "
+                     f"the mean position restored from the force balance; see README, velocity-only records)"
+                     + ("; accelerations differentiated from v (Savitzky-Golay)" if "v" in srcs else ""))
+    if any("x" not in r.derived and (r.v is None or r.a is None) for r in recs):
+        notes.append("  note: velocities/accelerations were estimated from x (Savitzky-Golay, see README)")
+    return notes

@@ -91,6 +91,14 @@ def map_columns(variables: dict, columns: dict | None, src: str) -> dict:
             raise GMRInputError(f"{src}: no '{need}': the file has {sorted(variables)}; map one, e.g. "
                                 f"columns={{'{need}': '<name>'}} (CLI: --columns {need}=<name>)")
     n = np.shape(out["t"])[0] if np.ndim(out["t"]) else 0
+    for field in ("equilibrium", "masses"):  # a column that repeats one value per DOF (a CSV has no scalars)
+        val = out.get(field)
+        if val is not None and np.ndim(val) >= 1 and n > 1 and np.shape(val)[0] == n:
+            arr = np.asarray(val, float).reshape(n, -1)
+            if not np.all(np.isfinite(arr)) or np.ptp(arr, axis=0).max() > 1e-9 * max(np.abs(arr).max(), 1e-300):
+                raise GMRInputError(f"{src}: the column mapped to '{field}' varies over the record; '{field}' is one "
+                                    f"number per DOF (a column that repeats it, or a number: --columns {field}=0.012)")
+            out[field] = arr[0]
     for field, val in out.items():  # a scalar scale alone (e.g. force=gtau) is a mistake, not a signal
         if field not in ("masses", "equilibrium") and np.ndim(val) == 0:
             raise GMRInputError(f"{src}: column mapping gives a single number for '{field}', not {n} samples")

@@ -88,7 +88,8 @@ class Recording:
             eq = np.asarray(self.equilibrium, float)
             if eq.shape != (x.shape[1],) or not np.all(np.isfinite(eq)):
                 raise GMRInputError(f"{self.name}: 'equilibrium' must hold {x.shape[1]} finite number(s) (one "
-                                    f"static displacement per DOF), got {eq.tolist()}")
+                                    f"static displacement per DOF), got {describe(eq.tolist())} (shape "
+                                    f"{eq.shape})")
             x = x + eq[None, :]
             info["equilibrium"] = "given"
         else:
