@@ -12,8 +12,8 @@ import numpy as np
 from .._coordination._coordinate import GlobalCoefficients, coordinate, split_flat
 from .._coordination._discrepancy import add_discrepancy, calibrate_covariance
 from .._coordination._joint import CONFLICT as JOINT_CONFLICT
-from .._coordination._joint import (JointSettings, RowFilter, damping_faults, joint_coordinate, restoring_fault_kinds,
-                                    restoring_faults, row_filter)
+from .._coordination._joint import (JointSettings, RowFilter, damping_faults, joint_coordinate, restoring_faults,
+                                    row_filter)
 from .._errors import GMRInputError
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, Library
 from .._fit._local_fit import AutoThreshold, LocalFit, fit_local, with_constant
@@ -597,12 +597,12 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                 # at 30 dB F''' at one well, t = 3.3, gave a degree-8 law 6 % off, "confirmed" by one redundant
                 # condition, now the joint law 1.34 %; at 40 dB 1.92 -> 1.36 %; at 60 dB 0.244 -> 0.288 %, the
                 # odd GLS of degree 9, its band covering the truth on 57 % of the box instead of 19 %)
+                even = degree(paper.value.stiffness) % 2 == 0
+                unconfirmed = bool(faults["restoring"]) and (redundancy(paper) == 0 or even)
                 # ... and only where the motions the model is used on reach the escape (the 5-cell
                 # Kresling tip cell's quintic turns outward far beyond its energy bound: the joint
                 # regression there cost 1.41 % -> 3.56 % restoring error for nothing)
                 reach = _sanity.reachable_escapes(paper.value.stiffness, fits.equilibrium, energy)
-                even_law = "even" in restoring_fault_kinds(paper.value.stiffness, fits.equilibrium)
-                unconfirmed = bool(faults["restoring"]) and (redundancy(paper) == 0 or even_law)
                 # An even degree (a term resolved at some wells only) gives way to the highest odd degree
                 # below it, fitted to all the local conditions, where that one is admissible and the
                 # conditions do not reject it (`odd_degree`)
@@ -614,8 +614,8 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                                  f"(an even degree cannot confine; chi-squared p = {float(odd.stats['p_r']):.3g})"]
                 # ... but an even degree cannot confine on both sides whatever the bound says (magnetic
                 # bistable, 30 dB, F'' resolved at one well only: an exact quartic kept for want of a
-                # reachable escape was 72 % off, the joint law 45 %)
-                even = degree(paper.value.stiffness) % 2 == 0
+                # reachable escape was 72 % off, the joint law 45 %; a paper law replaced by the odd degree
+                # above is no longer unconfirmed, so `even` is still that of the law this test judges)
                 if unconfirmed and not reach and not even:
                     why = why + ["kept: no motion within the model's energy bound "
                                  f"({energy:.3g}) reaches an escape"]
@@ -820,11 +820,9 @@ def reconstruct(
       only, 0.45 % excitation: 1.3-3.3 % restoring error from noise-free to 30 dB (the curvature
       oracle 2.6 %; by default 8.3-15.7 %); magnetic bistable, x only: 18.5-20.8 % down to 45 dB
       (oracle 20.8 %; default 45-56 %), at 30 dB unchanged (45 %); v only unchanged
-      (results/derived_accelerations.md). Not the default yet: the route rules downstream were
-      tuned on the OLS errors and the correlated noise. With it, a 10 Hz single-tone x-only record of the
-      bistable joint keeps spurious local terms that now pass the 3-sigma screen, and its
-      11th-degree law that blows up between the wells is no longer rejected (the raw-row R² that
-      rejected it came from the correlated noise); the arch at base amplitude 0.01 falls from the
+      (results/derived_accelerations.md). Not the default yet: on single-tone records it is
+      mixed (bistable joint, 10 Hz sine, x only, 30 dB seeds 0-3: 2.7/17/2.7/2.7 % against
+      0.34/0.42/9.0/2.3 % by default; results/joint_sine_records.md); the arch at base amplitude 0.01 falls from the
       joint regression's degree 7 (5-8 %) to its cubic (14 %), the joint regression's BIC being
       computed on raw rows whose noise is not white.
 

@@ -15,8 +15,10 @@ small: shallow arch, velocity only, 0.45 % of the interwell distance, noise-free
 
 `restore_slow` fits the local law in the band above f_hp only (the target and every regressor
 high-passed by the same cosine-transform filter as the drift removal: the equation holds in any
-band, and the missing s barely touches that band), then adds s = -lowpass(k2 q^2 + k3 q^3) / k1
-to x, keeping only the terms the band-limited fit resolves (|t| >= `MIN_T`).
+band, and the missing s barely touches that band), then adds s = -lowpass(k2 q^2) / k1 to x
+where the band-limited fit resolves k2 (|t| >= `MIN_T`). The cubic is fitted, so that it does not
+bias k2, but left out of s: the missing s enters the band above f_hp through 2 k2 q s, which a
+cubic absorbs (k3 - 4 k2^2 / (3 k1) on a sine: the arch's -1.06 fitted as -78).
 """
 
 from dataclasses import replace
@@ -26,7 +28,7 @@ import numpy as np
 from .._recordings._integrate import remove_drift
 from .._recordings._recording import Recording
 
-#: a curvature or cubic term enters the restored shift only where the band-limited fit resolves it
+#: the curvature enters the restored shift only where the band-limited fit resolves it
 MIN_T = 3.0
 #: the first and last fraction of the record left out of the band-limited fit (integration edges)
 EDGE = 0.05
@@ -55,9 +57,8 @@ def slow_shift(x: np.ndarray, v: np.ndarray, y: np.ndarray, dt: float, f_hp: flo
     force the DOF carries) and v, with the band-limited local fit's slope, curvature and cubic
     (`k`, `t`), the passes it took and the shift's RMS relative to the vibration's (`rms_ratio`).
 
-    Iterated: the missing s also enters the band above f_hp, through 2 k2 q s, which looks like
-    a cubic (k3 - 4 k2^2 / (3 k1) on a sine: the arch's -1.06 fitted as -78); each pass refits on
-    x + s, and its cubic enters s only from the second pass on."""
+    Iterated (`PASSES`): each pass refits the band-limited law on x + s, whose columns then carry
+    the shift the previous pass restored."""
     x, v, y = (np.asarray(z, float) for z in (x, v, y))
     s = np.zeros_like(x)
     info: dict = {"passes": 0}
@@ -68,8 +69,7 @@ def slow_shift(x: np.ndarray, v: np.ndarray, y: np.ndarray, dt: float, f_hp: flo
         info = {"k": [k1, k2, k3], "t": [float(z) for z in t[:3]], "passes": it + 1}
         if not (np.isfinite(k1) and k1 > 0 and abs(t[0]) >= MIN_T):  # no stable slope to balance with
             return np.zeros_like(x), info | {"rms_ratio": 0.0}
-        terms = [(k2, t[1], 2)]
-        nonlinear = sum((kk * q**p for kk, tt, p in terms if abs(tt) >= MIN_T), np.zeros_like(q))
+        nonlinear = k2 * q**2 if abs(t[1]) >= MIN_T else np.zeros_like(q)
         slow = nonlinear - remove_drift(nonlinear, dt, f_hp)  # its content below f_hp
         s = -slow / k1
     q = x - np.mean(x)
@@ -81,7 +81,7 @@ def restore_slow(rec: Recording, targets: np.ndarray) -> Recording:
     was integrated from v or a and the equilibrium was given; unchanged otherwise. `targets`
     (N, D): the force each DOF carries (`regression_targets`). Recorded in
     `rec.integration["slow_restored"]` (per DOF: the band-limited slope, curvature and cubic with
-    their t, and the shift's RMS relative to the vibration's)."""
+    their t, the passes, and the shift's RMS relative to the vibration's)."""
     info = rec.integration or {}
     if "x" not in rec.derived or not info.get("f_highpass_hz") or rec.equilibrium is None:
         return rec
