@@ -29,6 +29,7 @@ from . import _design_law, _noise, _resolution, _sanity, _shape_prior
 from ._degree import averaged_parts, confine_borrowed, degree, least_risk_degree, mixture, odd_degree, redundancy
 from ._sanity import GMRDataWarning
 from ._slow import restore_slow
+from ._truncation import with_truncation
 
 #: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
 DEFAULT_SOLVER = STLS(threshold=0.1, alpha=0.0, normalize_columns=True, unbias=True)
@@ -552,6 +553,24 @@ def _calibrated(coord: Solution, fits: LocalFit, library: Library, route: str, p
     return g, calibrate_covariance(fits, library, cov, method=route, confining=confining, max_degree=cap)
 
 
+def _truncation_degree(coord: Solution, fits: LocalFit, xs, vs, ys, w, library: Library):
+    """The paper route's restoring degree chosen with each well's Taylor truncation in its covariance
+    (`_truncation`), the law then fitted at that degree with the covariances as they were (its
+    `stats["max_degree_r"]`; the calibration takes the same bound). Returns `(coord, notes)`."""
+    probe = jax.device_get(coordinate(with_truncation(fits, xs, vs, ys, w, library), library, method="gls",
+                                      throw=False))
+    k0, k = int(coord.stats["K_r"]), int(probe.stats["K_r"])
+    if probe.result != RESULTS.successful or coord.result != RESULTS.successful or k >= k0:
+        return coord, []
+    alt = jax.device_get(coordinate(fits, library, method="gls", max_degree=jnp.asarray(k), throw=False))
+    if alt.result != RESULTS.successful or not np.all(np.isfinite(np.asarray(alt.value.flat()))):
+        return coord, []
+    alt.stats["max_degree_r"] = k
+    return alt, [f"degree {k} instead of {k0}: the local conditions' misfit at degree {k} is within the "
+                 f"truncation of their Taylor series (the next order's effect on the kept terms; chi-squared "
+                 f"p = {float(probe.stats['p_r']):.3g} with it)"]
+
+
 def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordination: str, mass: float, i: int,
                     odd_only: bool = False, x_noise=None, rows: RowFilter | None = None):
     """One DOF's coordination route (`reconstruct`'s `coordination`; "auto": the paper route, GLS,
@@ -570,6 +589,8 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
     else:
         coord = jax.device_get(coordinate(fits, library, method="gls" if coordination == "auto" else coordination,
                                           confining=odd_only, throw=False))
+        if coordination == "auto" and not odd_only:
+            coord, lowered = _truncation_degree(coord, fits, xs, vs, ys, w, library)
         if coordination == "auto" and odd_only:
             coord, lowered = confine_borrowed(coord, fits, library, energy)
             coord, risk_notes = least_risk_degree(coord, fits, library, energy)
