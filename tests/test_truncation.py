@@ -32,7 +32,7 @@ def test_the_sensitivity_is_the_change_the_next_term_makes():
         y = y0 + a4 * q**4
         coef = np.zeros(lib.n_terms)
         coef[support] = np.linalg.lstsq(theta, y, rcond=None)[0]
-        d = sensitivity(coef, q, v, y, w, lib)
+        d, t2 = sensitivity(coef, q, v, y, w, lib)
         assert np.all(d[~support] == 0)
         if expect_zero:
             np.testing.assert_allclose(d, 0, atol=1e-6 * np.abs(coef).max())
@@ -40,8 +40,22 @@ def test_the_sensitivity_is_the_change_the_next_term_makes():
             fixed = coef + d
             np.testing.assert_allclose(fixed[2], true[2], rtol=1e-6)  # the curvature the q^4 had biased
             assert abs(coef[2] - true[2]) > 1e-3 * abs(true[2])
+            assert t2 > 1e6  # noise-free: resolved
+    # with noise and no q^4 term, t^2 is chi-squared with one degree of freedom (mean 1) and delta is the
+    # new coefficient's noise carried onto the kept ones: its spread is delta delta' / t^2's
+    rng = np.random.default_rng(1)
+    t2s, d2, var = [], [], []
+    for _ in range(40):
+        y = y0 + 1e-3 * rng.standard_normal(q.size)
+        coef = np.zeros(lib.n_terms)
+        coef[support] = np.linalg.lstsq(theta, y, rcond=None)[0]
+        d, t2 = sensitivity(coef, q, v, y, w, lib)
+        t2s.append(t2), d2.append(d[2] ** 2), var.append(d[2] ** 2 / t2)
+    assert 0.5 < np.mean(t2s) < 1.6, np.mean(t2s)
+    assert 0.5 < np.mean(d2) / np.mean(var) < 1.6
     still = np.zeros_like(q)
-    assert np.all(sensitivity(coef, still, still, y0, w, lib) == 0)
+    d, t2 = sensitivity(coef, still, still, y0, w, lib)
+    assert np.all(d == 0) and t2 == np.inf
 
 
 def test_the_truncation_chooses_the_degree_of_the_tristable_nes():

@@ -474,6 +474,11 @@ def restoring_fault_kinds(stiffness, equilibria) -> dict[str, int]:
     return dict(kind for kind, _ in _restoring_faults(stiffness, equilibria))
 
 
+def restoring_fault_details(stiffness, equilibria) -> list[tuple[str, int, str]]:
+    """`restoring_faults` as (kind, count, message) triples (`restoring_fault_kinds`' kinds)."""
+    return [(kind, n, msg) for (kind, n), msg in _restoring_faults(stiffness, equilibria)]
+
+
 def _restoring_faults(stiffness, equilibria) -> list[tuple[tuple[str, int], str]]:
     eq = np.asarray(equilibria, float)
     lo, hi = float(eq.min()), float(eq.max())

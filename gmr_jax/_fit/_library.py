@@ -87,6 +87,10 @@ class Library(eqx.Module):
     def orders(self, physics: str) -> np.ndarray:
         return np.array([k for p, k in self.terms() if p == physics], dtype=int)
 
+    def column(self, physics: str, order: int) -> int:
+        """The column of the term (`physics`, `order`), e.g. `column(STIFFNESS, 1)`: the local stiffness."""
+        return self.terms().index((physics, order))
+
     def __call__(
         self, x: Float[Array, " samples"], v: Float[Array, " samples"], sign_eps: float = 0.0
     ) -> Float[Array, "samples terms"]:

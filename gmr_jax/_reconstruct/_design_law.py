@@ -37,7 +37,7 @@ its values against the prior and the rms standard deviation over the nodes befor
 import jax.scipy.special as jsp
 import numpy as np
 
-from .._coordination._joint import restoring_fault_kinds, restoring_faults
+from .._coordination._joint import restoring_fault_details, restoring_fault_kinds
 from ._shape_prior import P_CONFLICT, POSITION_TOL, TAU_FLOOR, TAU_MAX
 
 #: Interior (and just-outside) nodes in u = (x - w_0) / L where the laws are compared and pooled.
@@ -221,9 +221,8 @@ def pool_design_laws(flats: list, n_restoring: list, covariances: list, regions:
         lost = [k for k, n in after_k.items()
                 if k not in before or (k == "sign" and abs(n - need) > abs(before[k] - need))]
         if lost:
-            msgs = restoring_faults(new[:ns], wells[j])
             summary["excluded"][j] = "pooled, its law would not be admissible: " + "; ".join(
-                m for m, (k, _) in zip(msgs, after_k.items()) if k in lost)
+                m for k, _, m in restoring_fault_details(new[:ns], wells[j]) if k in lost)
             continue
         out_f[j] = new
         out_c[j] = new_cov
