@@ -38,7 +38,7 @@ import jax.scipy.special as jsp
 import numpy as np
 
 from .._coordination._joint import restoring_fault_details, restoring_fault_kinds
-from ._shape_prior import P_CONFLICT, POSITION_TOL, TAU_FLOOR, TAU_MAX
+from ._shape_prior import P_CONFLICT, POSITION_TOL, TAU_FLOOR, TAU_MAX, relative_tau
 
 #: Interior (and just-outside) nodes in u = (x - w_0) / L where the laws are compared and pooled.
 NODES = np.array([-0.15, 0.1, 0.3, 0.5, 0.7, 0.9, 1.15])
@@ -79,23 +79,11 @@ def _spread(tau: float, level: float) -> np.ndarray:
 
 
 def _tau(values: dict) -> float | None:
-    """Pooled relative spread of the members' node values beyond their noise (DerSimonian-Laird
-    per node, pooled over the nodes, in units of each node's mean)."""
-    num = den = 0.0
-    for k in range(NODES.size):
-        x = np.array([g[k] for g, _ in values.values()])
-        var = np.maximum(np.array([c[k, k] for _, c in values.values()]), 1e-300)
-        if x.size < 2:
-            return None
-        w = 1.0 / var
-        mu = float(np.sum(w * x) / np.sum(w))
-        q = float(np.sum(w * (x - mu) ** 2))
-        c = float(np.sum(w) - np.sum(w**2) / np.sum(w))
-        if mu == 0 or c <= 0:
-            continue
-        num += q - (x.size - 1)
-        den += c * mu**2
-    return float(np.sqrt(max(num, 0.0) / den)) if den > 0 else None
+    """Pooled relative spread of the members' node values beyond their noise (`relative_tau` over
+    the nodes); None for fewer than 2 members."""
+    if len(values) < 2:
+        return None
+    return relative_tau([(g[k], c[k, k]) for g, c in values.values()] for k in range(NODES.size))
 
 
 def _prior(values: dict, j: int, members: list, tau: float, level: float):

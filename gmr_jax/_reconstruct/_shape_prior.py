@@ -127,12 +127,13 @@ def _quantities(per_dof):
     return out
 
 
-def _tau(quantities, members):
-    """Pooled relative heterogeneity of the ratios among `members` beyond their noise and their
-    (pooled DerSimonian-Laird moment estimate, in units of each ratio's mean)."""
+def relative_tau(groups) -> float | None:
+    """Pooled relative heterogeneity beyond the noise of several groups of [(value, var)] (the
+    DerSimonian-Laird moment estimate, pooled over the groups, in units of each group's mean);
+    groups of fewer than 2 are skipped; None where no group informs it. Both design gates use it:
+    the cells' Taylor ratios (`_tau`) and their laws' node values (`_design_law`)."""
     num = den = 0.0
-    for vals in quantities.values():
-        sub = [vals[j] for j in members if j in vals]
+    for sub in groups:
         if len(sub) < 2:
             continue
         _, _, q, df, c, mu = _pooled(sub)
@@ -143,6 +144,12 @@ def _tau(quantities, members):
     if den <= 0:
         return None
     return float(np.sqrt(max(num, 0.0) / den))
+
+
+def _tau(quantities, members):
+    """Pooled relative heterogeneity of the ratios among `members` beyond their noise
+    (`relative_tau`)."""
+    return relative_tau([vals[j] for j in members if j in vals] for vals in quantities.values())
 
 
 def _conflict_p(quantities, j, members, tau):
