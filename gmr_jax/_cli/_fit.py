@@ -37,15 +37,10 @@ def register(sub):
     f.add_argument("--no-eiv", action="store_true",
                    help="plain least squares in the local fits (by default, where x is measured with the "
                    "accelerations, they are corrected for the noise on x: errors in variables)")
-    noise = f.add_mutually_exclusive_group()
-    noise.add_argument("--structured-noise", action="store_true",
-                       help="where accelerations are estimated (x only, v only, x and v): take their noise for what "
-                       "it is (the differentiation filter's), resolve the curvature at each well, and run the joint "
-                       "regression on low-passed rows; the default on swept records, this flag asks for it on a "
-                       "steady sine too (results/derived_accelerations.md, results/joint_sine_records.md)")
-    noise.add_argument("--no-structured-noise", action="store_true",
-                       help="take the estimated accelerations' noise as white (plain least-squares covariances) even "
-                       "on swept records")
+    f.add_argument("--structured-noise", action="store_true",
+                   help="where accelerations are estimated (x only, v only, x and v): take their noise for what it "
+                   "is (the differentiation filter's), resolve the curvature at each well, and run the joint "
+                   "regression on low-passed rows (opt-in; results/derived_accelerations.md)")
     f.add_argument("--restoring-order", "-r", type=positive_int, default=5)
     f.add_argument("--damping-order", "-d", type=positive_int, default=5)
     f.add_argument("--threshold", default="auto", help="STLS threshold on normalised coefficients, or 'auto' "
@@ -140,8 +135,8 @@ def run(args) -> int:
             kwargs["shared_design"] = False
         if args.no_eiv:
             kwargs["errors_in_variables"] = False
-        if args.structured_noise or args.no_structured_noise:
-            kwargs["structured_noise"] = bool(args.structured_noise)
+        if args.structured_noise:
+            kwargs["structured_noise"] = True
         kwargs["progress"] = lambda msg: stage(f"gmr: {msg}")
     stage(f"{args.method}: local fits and coordination (the first run of a shape compiles)")
     with warnings.catch_warnings():  # printed below as `warning:` lines, once each

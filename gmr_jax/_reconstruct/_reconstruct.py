@@ -482,19 +482,6 @@ def _derived_rows(recs, groups, i: int) -> RowFilter | None:
     return row_filter(float(dts[0]), edge) if edge > 0 else None
 
 
-def _steady_sine(recordings) -> bool:
-    """Whether a recording's response is a steady sine (`tonal_fraction` >= `TONAL` on some DOF of its
-    first measured channel among x, v, a): `reconstruct`'s `structured_noise` default is off there."""
-    for r in recordings:
-        sig = next((z for z in (r.x, r.v, r.a) if z is not None), None)
-        try:  # a malformed recording is refused right after, with its own message (`_resolve`)
-            if any(tonal_fraction(np.asarray(sig)[:, i], r.dt) >= TONAL for i in range(np.shape(sig)[1])):
-                return True
-        except Exception:  # noqa: BLE001
-            continue
-    return False
-
-
 def _joint(fits: LocalFit, xs, vs, ys, w, speed: float, restoring: Solution | None = None,
            settings: JointSettings = JointSettings(), x_noise=None, rows: RowFilter | None = None) -> Solution:
     """The joint coordination (`joint_coordinate`) as a `Solution` like `coordinate`'s; given
@@ -793,7 +780,7 @@ def reconstruct(
     shared_damping: bool = True,
     extend_restoring: bool | None = None,
     shared_design: bool | None = None,
-    structured_noise: bool | None = None,
+    structured_noise: bool = False,
     errors_in_variables: bool = True,
     throw: bool = True,
     progress: Callable[[str], None] | None = None,
@@ -861,9 +848,7 @@ def reconstruct(
       (the paper's method as published). 5-cell Kresling chains: RESULTS.md, issue 15.
 
     - `structured_noise`: where accelerations are estimated (from x or v), take their noise for
-      what it is (results/derived_noise.md). None (default): on where accelerations are estimated
-      and no record is a steady sine (`_steady_sine`: `tonal_fraction` >= `TONAL`), off otherwise;
-      with measured accelerations it changes nothing. x'' leaves each sample out of its own window
+      what it is (opt-in; results/derived_noise.md): x'' leaves each sample out of its own window
       (`Recording.complete(exclude_center=True)`; otherwise the filter's centre weight
       correlates the target's noise with the regressor x(t): shallow arch, x only, 30 dB, the
       local stiffness 2.5-4 % high), the first and last half-window (the edge fit's
@@ -872,16 +857,17 @@ def reconstruct(
       filter, from the channels' noise floors; `_fit/_target_noise.py`), not OLS, which takes
       that noise as white and overstated the errors 2-25 times (F'' at 60 dB: se 12-24 % against
       a scatter of 2-3 %). With it, each well's restoring series is also extended while the next
-      order is resolved, up to the curvature q^2 (`extend_restoring`). (The joint regression runs on
-      rows low-passed at 1.5 x the band edge wherever accelerations are estimated and no record is a
-      steady sine, with or without it: `_derived_rows`.) Shallow arch, x only, 0.45 % sweeps:
-      1.3-3.3 % restoring error from noise-free to 30 dB (the curvature oracle 2.6 %; off: 14.5 % at
-      45-60 dB, the cubic); at base amplitude 0.01, 60 dB, seeds 0-1: 3.4/10.4 % (off 14.4 %), 30 dB
-      2.6/1.4 % either way; magnetic bistable, x only: 18.5-20.8 % down to 45 dB (oracle 20.8 %; off
-      45-56 %), at 30 dB 45 % either way; v only unchanged (results/derived_accelerations.md).
-      Off on a steady sine: bistable joint, 10 Hz sine records, x only (results/joint_sine_records.md),
-      on it is better at 45-30 dB (median 1.26 % against 5.69 %) but worse at 60 dB (16-18 % against
-      15-18 %, degree 13 either way), and on the single-tone arch it is mixed (results/single_tone.md).
+      order is resolved, up to the curvature q^2 (`extend_restoring`). (The joint regression runs
+      on rows low-passed at 1.5 x the band edge wherever accelerations are estimated and no record is
+      a steady sine, with or without it: `_derived_rows`.) Shallow arch, x only, 0.45 % sweeps:
+      1.3-3.3 % restoring error from noise-free to 30 dB (the curvature oracle 2.6 %; without it
+      14.5 % at 45-60 dB, the cubic); magnetic bistable, x only: 18.5-20.8 % down to 45 dB (oracle
+      20.8 %; without it 45-56 %), at 30 dB 45 % either way; v only unchanged
+      (results/derived_accelerations.md). Not the default: made the default on swept records, it kept
+      small spurious damping terms (v, x v) on notebook 06's displacement-only joint records (40 dB),
+      from which `refine` made the holdout worse (5.49 -> 6.19 %; without it 6.70 -> 6.41 %). On steady
+      sines (bistable joint, 10 Hz, x only; results/joint_sine_records.md) it is better at 45-30 dB
+      (median 1.26 % against 5.69 %), worse at 60 dB; mixed on the single-tone arch.
 
     - `errors_in_variables`: where x is measured with its accelerations (the noise of x and of
       the target are independent), each local fit is corrected for the white noise on x (its
@@ -922,8 +908,6 @@ def reconstruct(
                for r in recordings)
     if keep_restoring_order is None:
         keep_restoring_order = 3 if measured else (2 if once else 1)
-    if structured_noise is None:
-        structured_noise = not measured and not _steady_sine(recordings)
     extend_upto = None
     if extend_restoring is None:  # estimated accelerations with their noise's structure: up to the curvature
         extend_restoring, extend_upto = (True, None) if measured else (structured_noise, 2)
