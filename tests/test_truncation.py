@@ -1,9 +1,10 @@
-"""The local Taylor truncation as a variance of the coordination's conditions (`_reconstruct/_truncation.py`)."""
+"""The local Taylor truncation in the coordination's degree choice (`_reconstruct/_truncation.py`)."""
 
 import warnings
 
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import gmr_jax as g
 from gmr_jax._reconstruct._truncation import sensitivity
@@ -58,6 +59,7 @@ def test_the_sensitivity_is_the_change_the_next_term_makes():
     assert np.all(d == 0) and t2 == np.inf
 
 
+@pytest.mark.slow  # one NES reconstruction (~20 s cold); the default tier keeps the unit test above
 def test_the_truncation_chooses_the_degree_of_the_tristable_nes():
     """Tri-stable NES (paper orders 3, 3), 60 dB, seed 0: the local F'' at two wells was 3-4 standard
     errors off for want of q^4, the chi-squared test rejected degree 7 and the law of degree 8, then 9,
