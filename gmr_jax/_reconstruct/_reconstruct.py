@@ -606,18 +606,18 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
     confining = False  # the GLS restoring degree restricted to odd ones (auto only, `odd_degree`)
     speed = _speed(fits, vs, w, mass, library) if coordination in ("auto", "joint") else None
     energy = None if speed is None else 0.5 * float(mass) * speed**2  # the model's energy bound
-    lowered = []  # a borrowed law lowered to a degree that confines (`confine_borrowed`)
+    lowered = []  # why the degree was lowered: to confine a borrowed law, or by the truncation test
     if coordination == "joint":
         coord = _joint(fits, xs, vs, ys, w, speed, x_noise=x_noise, rows=rows)
     else:
         coord = jax.device_get(coordinate(fits, library, method="gls" if coordination == "auto" else coordination,
                                           confining=odd_only, throw=False))
-        if coordination == "auto" and not odd_only:
-            coord, lowered = _truncation_degree(coord, fits, xs, vs, ys, w, library)
         if coordination == "auto" and odd_only:
             coord, lowered = confine_borrowed(coord, fits, library, energy)
             coord, risk_notes = least_risk_degree(coord, fits, library, energy)
             lowered = lowered + risk_notes
+        elif coordination == "auto":
+            coord, lowered = _truncation_degree(coord, fits, xs, vs, ys, w, library)
         if coordination == "auto":
             faults = _paper_route_faults(coord, fits, xs, vs, ys, w, speed, library)
             why = faults["restoring"] + faults["damping"] + faults["data"] + faults["blowup"]

@@ -16,6 +16,7 @@ fits as they were, its band widened by the spread to the next odd degree (`_trun
 NumPy, on `reconstruct`'s padded per-well arrays.
 """
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -71,5 +72,4 @@ def with_truncation(fits: LocalFit, xs, vs, ys, w, library: Library) -> LocalFit
     t2 = np.array([t for _, t in out])
     cov = np.asarray(fits.covariance, float) + deltas[:, :, None] * deltas[:, None, :] / t2[:, None, None]
     new = coef + deltas
-    return LocalFit(equilibrium=fits.equilibrium, coef=jnp.asarray(new), covariance=jnp.asarray(cov),
-                    threshold=fits.threshold, rss=fits.rss, n_samples=fits.n_samples)
+    return eqx.tree_at(lambda f: (f.coef, f.covariance), fits, (jnp.asarray(new), jnp.asarray(cov)))

@@ -42,13 +42,18 @@ def dominant_period(x: np.ndarray, dt: float) -> float:
     return 1.0 / f if f > 0 else x.size * dt
 
 
-def band_edge(x: np.ndarray, dt: float, fraction: float = 0.995) -> float:
-    """Frequency below which `fraction` of the power of x (mean removed) lies, in Hz."""
+def _power(x: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """(frequencies in Hz, Hann-windowed power of x with its mean removed; the DC bin 0)."""
     x = np.asarray(x, float) - np.mean(x)
     p = np.abs(np.fft.rfft(x * np.hanning(x.size))) ** 2
     p[0] = 0.0
+    return np.fft.rfftfreq(x.size, dt), p
+
+
+def band_edge(x: np.ndarray, dt: float, fraction: float = 0.995) -> float:
+    """Frequency below which `fraction` of the power of x (mean removed) lies, in Hz."""
+    freqs, p = _power(x, dt)
     c = np.cumsum(p) / max(np.sum(p), 1e-300)
-    freqs = np.fft.rfftfreq(x.size, dt)
     return float(freqs[min(int(np.searchsorted(c, fraction)), freqs.size - 1)])
 
 
@@ -56,10 +61,7 @@ def tonal_fraction(x: np.ndarray, dt: float) -> float:
     """Share of the power of x (mean removed) within 5 % (at least 3 bins) of its spectral peak: near 1
     for the steady response to a sine (0.998-1 on the single-tone records of `studies/single_tone.py`),
     0.2-0.8 for a base sweep (0.7-0.82 where it dwells on a lightly damped resonance)."""
-    x = np.asarray(x, float) - np.mean(x)
-    p = np.abs(np.fft.rfft(x * np.hanning(x.size))) ** 2
-    p[0] = 0.0
-    f = np.fft.rfftfreq(x.size, dt)
+    f, p = _power(x, dt)
     k = int(np.argmax(p))
     near = np.abs(f - f[k]) <= max(0.05 * f[k], 3.0 * (f[1] - f[0]))
     return float(p[near].sum() / max(p.sum(), 1e-300))
