@@ -37,7 +37,7 @@ def run(case, snr, seed, structured):
     t0 = time.time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        sol = g.reconstruct(recs, throw=False, structured_noise=structured)
+        sol = g.reconstruct(recs, throw=False, structured_noise=True if structured else None)
     secs = time.time() - t0
     err = g.metrics.restoring_error(sol.value, s.truth, 0, s.x_range[0])
     orc = sc.oracle_error(s, 0)

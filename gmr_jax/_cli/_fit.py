@@ -5,6 +5,7 @@ refusal is an input error (exit 2); a warning is printed to stderr as a `warning
 recorded in the model file under "warnings", and the exit status stays 0 (3 with --strict).
 """
 
+import argparse
 import json
 import sys
 import warnings
@@ -37,10 +38,10 @@ def register(sub):
     f.add_argument("--no-eiv", action="store_true",
                    help="plain least squares in the local fits (by default, where x is measured with the "
                    "accelerations, they are corrected for the noise on x: errors in variables)")
-    f.add_argument("--structured-noise", action="store_true",
+    f.add_argument("--structured-noise", action=argparse.BooleanOptionalAction, default=None,
                    help="where accelerations are estimated (x only, v only, x and v): take their noise for what it "
-                   "is (the differentiation filter's), resolve the curvature at each well, and run the joint "
-                   "regression on low-passed rows (opt-in; results/derived_accelerations.md)")
+                   "is (the differentiation filter's) and resolve the curvature at each well (default: on where x "
+                   "was integrated from v, off otherwise; results/derived_accelerations.md)")
     f.add_argument("--restoring-order", "-r", type=positive_int, default=5)
     f.add_argument("--damping-order", "-d", type=positive_int, default=5)
     f.add_argument("--threshold", default="auto", help="STLS threshold on normalised coefficients, or 'auto' "
@@ -135,8 +136,8 @@ def run(args) -> int:
             kwargs["shared_design"] = False
         if args.no_eiv:
             kwargs["errors_in_variables"] = False
-        if args.structured_noise:
-            kwargs["structured_noise"] = True
+        if args.structured_noise is not None:
+            kwargs["structured_noise"] = args.structured_noise
         kwargs["progress"] = lambda msg: stage(f"gmr: {msg}")
     stage(f"{args.method}: local fits and coordination (the first run of a shape compiles)")
     with warnings.catch_warnings():  # printed below as `warning:` lines, once each

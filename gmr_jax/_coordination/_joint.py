@@ -331,6 +331,7 @@ def joint_coordinate(
     refine: bool = True,
     x_noise: Float[Array, " wells"] | None = None,
     rows: "RowFilter | None" = None,
+    band=None,
 ):
     """The joint coordination of one DOF (module docstring).
 
@@ -356,6 +357,9 @@ def joint_coordinate(
     polynomial), the noise variance sigma^2 still taken from the recorded samples' residual.
     `rows`: where the target holds differentiated signals, the regression is on the rows filtered
     by this low-pass and decimated (`RowFilter`, `row_filter`; no errors-in-variables correction).
+    `band`: where x was integrated, per well its records' (start, stop, dt, drift cut-off)
+    (`_reconstruct/_slow.segments`): each record's rows lose their content between 0 and its cut-off
+    (the mean kept), where the integrated x misses its slow part (`_slow.band_rows`).
     """
     xs, vs, ys, weights = (np.asarray(a, float) for a in (xs, vs, ys, weights))
     raw = (xs, vs, ys, weights, x_noise)
@@ -367,6 +371,11 @@ def joint_coordinate(
     w = weights / np.asarray(well_variance, float).reshape(-1, 1)
     u = (xs - c) / (2.0 * h)
     cols = np.asarray(layout.columns(jnp.asarray(u), jnp.asarray(vs)))  # (wells, samples, p)
+    if band is not None:
+        from .._reconstruct._slow import apply_band
+
+        cols = np.stack([apply_band(segs, cols[k]) for k, segs in enumerate(band)])
+        ys = np.stack([apply_band(segs, ys[k]) for k, segs in enumerate(band)])
     if rows is not None:
         cols, ys, w, weights = filtered_rows(rows, cols, ys, w, weights)
         x_noise = None  # the corrected score is per raw sample
@@ -411,7 +420,8 @@ def joint_coordinate(
         grid = np.asarray(settings.log_lambdas, float)
         fine = tuple(np.unique(np.concatenate([grid, 0.5 * (grid[1:] + grid[:-1])])).tolist())
         return joint_coordinate(*raw[:4], equilibria, well_variance, speed,
-                                dataclasses.replace(settings, log_lambdas=fine), refine=False, x_noise=raw[4], rows=rows)
+                                dataclasses.replace(settings, log_lambdas=fine), refine=False, x_noise=raw[4], rows=rows,
+                                band=band)
     if settings.tie > 0 and admissible.any():
         near = np.nonzero(score <= score[best] + settings.tie)[0]
         best = int(min(near, key=lambda i: (max(meta[i][2], default=1), meta[i][0], meta[i][1], score[i])))

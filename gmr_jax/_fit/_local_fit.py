@@ -25,6 +25,15 @@ class AutoThreshold(eqx.Module):
     lo: float = eqx.field(static=True, default=1e-6)
 
 
+class BandRows(eqx.Module):
+    """One well's regression rows without the slow band of an integrated x (`_reconstruct/_slow.band_rows`):
+    the library columns (at the centre the fit takes, the weighted mean of x) and the target, each
+    with its content between 0 and the record's drift cut-off removed (the mean kept)."""
+
+    theta: Float[Array, "samples terms"]
+    y: Float[Array, " samples"]
+
+
 class LocalFit(eqx.Module):
     """A local model around one equilibrium (Eq. 10): `coef` of the library in the shifted
     coordinate q = x - `equilibrium`, its covariance, and the threshold used."""
@@ -51,6 +60,7 @@ def fit_local(
     support: Bool[Array, " terms"] | None = None,
     noise: TargetNoise | None = None,
     x_noise: Float[Array, ""] | None = None,
+    band: BandRows | None = None,
     throw: bool = True,
 ) -> Solution:
     """Fit the local model of one equilibrium (Algorithm 1, steps 1.1-1.4).
@@ -67,13 +77,17 @@ def fit_local(
     residual-to-noise ratio in `stats["noise_ratio"]`), not sigma² (Θ'Θ)^-1. `x_noise`: the
     variance of white noise on the measured x; the regression is then corrected for it (errors in
     variables, `_errors_in_variables`: the corrected score; `stats["eiv_applied"]` says whether it
-    could be), while the covariance and `rss` stay those of the recorded samples.
+    could be), while the covariance and `rss` stay those of the recorded samples. `band`: the
+    rows without the slow band of an integrated x (`BandRows`): the fit (threshold, support,
+    coefficients, covariance, `rss`) runs on them.
 
     **Returns:** a `Solution` whose value is a `LocalFit`.
     """
     w = jnp.ones_like(x) if weights is None else weights
     xe = jnp.sum(w * x) / jnp.sum(w)
     theta = library(x - xe, v)
+    if band is not None:
+        theta, y = band.theta, band.y
     if select is not None:
         grid = default_thresholds(theta, y, select.n_grid, select.lo, weights)
         sel = select_threshold(theta, y, grid, solver, n_folds=select.n_folds, weights=weights)
@@ -126,4 +140,4 @@ def r2_nrmse(y, yhat):
     return 1.0 - resid / total, jnp.sqrt(resid / total)
 
 
-__all__ = ["AutoThreshold", "LocalFit", "fit_local", "r2_nrmse", "RESULTS", "jax"]
+__all__ = ["AutoThreshold", "BandRows", "LocalFit", "fit_local", "r2_nrmse", "RESULTS", "jax"]

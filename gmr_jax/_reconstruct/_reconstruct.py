@@ -29,7 +29,7 @@ from . import _design_law, _noise, _resolution, _sanity, _shape_prior
 from ._degree import (averaged_parts, confine_borrowed, degree, least_risk_degree, mixture, odd_degree, odd_gls,
                       redundancy)
 from ._sanity import GMRDataWarning
-from ._slow import restore_slow
+from ._slow import band_rows, edge_weights, integrated_cut, restore_slow, segments
 from ._truncation import with_truncation
 
 #: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
@@ -290,12 +290,13 @@ def low_order_terms(library: Library, restoring_order: int = 1) -> np.ndarray:
     return np.array([t in keep for t in library.terms()])
 
 
-def _fit_wells(xs, vs, ys, w, library, solver, select, keep=None, noise=None, x_noise=None):
+def _fit_wells(xs, vs, ys, w, library, solver, select, keep=None, noise=None, x_noise=None, band=None):
     # One jitted fit per well (same shapes: compiled once), stacked. A vmap over wells with
     # batched weights and the CV threshold sweep stalled in XLA:CPU (jax 0.10), so loop here.
     noise, x_noise = noise or [None] * xs.shape[0], x_noise or [None] * xs.shape[0]
+    band = band or [None] * xs.shape[0]
     sols = [fit_local(xs[k], vs[k], ys[k], library, solver, select, weights=w[k], keep=keep, noise=noise[k],
-                      x_noise=x_noise[k], throw=False) for k in range(xs.shape[0])]
+                      x_noise=x_noise[k], band=band[k], throw=False) for k in range(xs.shape[0])]
     return _stack(sols)
 
 
@@ -314,17 +315,18 @@ def velocity_terms_not_shared(coef: np.ndarray, library: Library) -> np.ndarray:
 
 
 def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_sigma, dof, failure, noise=None,
-                            x_noise=None):
+                            x_noise=None, band=None):
     """Drop the position-independent damping terms not selected at every well and refit the
     wells that had them (on their support less those terms, at their own threshold), until
     every remaining term is shared. Returns the fits and the dropped orders j."""
     dropped, noise, x_noise = [], noise or [None] * xs.shape[0], x_noise or [None] * xs.shape[0]
+    band = band or [None] * xs.shape[0]
     while np.any(drop := velocity_terms_not_shared(coef := np.asarray(fits.coef), library)):
         for k in np.nonzero(np.any((coef != 0) & drop[None, :], axis=1))[0]:
             slv = eqx.tree_at(lambda s: s.threshold, solver, fits.threshold[k])
             sol = fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=keep,
                             support=jnp.asarray(with_constant(coef[k] != 0, library) & ~drop), noise=noise[k],
-                            x_noise=x_noise[k], throw=False)
+                            x_noise=x_noise[k], band=band[k], throw=False)
             if sol.result != RESULTS.successful:
                 failure.note(sol.result, f"DOF {dof}, well {k}: refit without unshared damping terms")
             new = jax.tree.map(lambda a: np.asarray(a)[None], sol.value)
@@ -336,7 +338,7 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
 
 
 def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failure, noise=None, x_noise=None,
-                      upto: int | None = None):
+                      upto: int | None = None, band=None):
     """Raise each well's local restoring order while the next Taylor term is significant.
 
     STLS judges a term by its share of the local force, so a restoring q^(r+1) that the data
@@ -350,7 +352,7 @@ def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failur
     the fits and, per well, the orders added."""
     idx = library.indices(STIFFNESS)  # q^0 .. q^r, in order
     added, noise = [[] for _ in range(xs.shape[0])], noise or [None] * xs.shape[0]
-    x_noise = x_noise or [None] * xs.shape[0]
+    x_noise, band = x_noise or [None] * xs.shape[0], band or [None] * xs.shape[0]
     for k in range(xs.shape[0]):
         while True:
             coef = np.asarray(fits.coef[k])
@@ -361,7 +363,8 @@ def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failur
             mask[idx[top + 1]] = True
             slv = eqx.tree_at(lambda s: s.threshold, solver, fits.threshold[k])
             sol = jax.device_get(fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=mask,
-                                           support=mask, noise=noise[k], x_noise=x_noise[k], throw=False))
+                                           support=mask, noise=noise[k], x_noise=x_noise[k], band=band[k],
+                                           throw=False))
             c = float(sol.value.coef[idx[top + 1]])
             se = float(np.sqrt(max(float(sol.value.covariance[idx[top + 1], idx[top + 1]]), 0.0)))
             if int(sol.result._value) != int(RESULTS.successful._value) or not abs(c) >= n_sigma * se:
@@ -483,24 +486,27 @@ def _derived_rows(recs, groups, i: int) -> RowFilter | None:
 
 
 def _joint(fits: LocalFit, xs, vs, ys, w, speed: float, restoring: Solution | None = None,
-           settings: JointSettings = JointSettings(), x_noise=None, rows: RowFilter | None = None) -> Solution:
+           settings: JointSettings = JointSettings(), x_noise=None, rows: RowFilter | None = None,
+           segs=None) -> Solution:
     """The joint coordination (`joint_coordinate`) as a `Solution` like `coordinate`'s; given
     the paper route's `restoring` (a `coordinate` Solution), only the damping is refitted,
     to the force left after its restoring force. `x_noise`: per well, the variance of the noise
     on x (None where any well has none): the regression is corrected for it. `rows`: the low-pass
-    of rows whose target holds estimated accelerations (`row_filter`)."""
+    of rows whose target holds estimated accelerations (`row_filter`). `segs`: per well, its records'
+    slow bands where x was integrated (`_slow.segments`), taken out of the rows."""
     eq = np.asarray(fits.equilibrium)
     var = np.asarray(fits.rss) / np.maximum(np.asarray(fits.n_samples), 1.0)
     var = np.where(var > 0, var, np.max(var) if np.any(var > 0) else 1.0)
     if restoring is None:
         eiv = None if x_noise is None or any(v is None for v in x_noise) else np.asarray(x_noise, float)
         stiff, vdamp, pdamp, cov, stats = joint_coordinate(xs, vs, ys, w, eq, var, speed, settings, x_noise=eiv,
-                                                           rows=rows)
+                                                           rows=rows, band=segs)
     else:
         stiff = np.asarray(restoring.value.stiffness)
         ys = np.asarray(ys) - np.polynomial.polynomial.polyval(np.asarray(xs), stiff)
         settings = JointSettings(log_lambdas=(0.0,), damping_only=True)
-        _, vdamp, pdamp, cov_j, stats = joint_coordinate(xs, vs, ys, w, eq, var, speed, settings, rows=rows)
+        _, vdamp, pdamp, cov_j, stats = joint_coordinate(xs, vs, ys, w, eq, var, speed, settings, rows=rows,
+                                                         band=segs)
         nk, nj = stiff.shape[0], cov_j.shape[0] - (settings.max_degree + 1)
         cov = np.zeros((nk + nj, nk + nj))
         cov[:nk, :nk] = np.asarray(restoring.aux)[:nk, :nk]
@@ -566,14 +572,14 @@ def _calibrated(coord: Solution, fits: LocalFit, library: Library, route: str, p
     return g, cov
 
 
-def _truncation_degree(coord: Solution, fits: LocalFit, xs, vs, ys, w, library: Library):
+def _truncation_degree(coord: Solution, fits: LocalFit, xs, vs, ys, w, library: Library, band=None):
     """The paper route's restoring degree chosen from the local fits one restoring order higher
     (`_truncation.with_truncation`: where the next Taylor term biases the kept ones, the chi-squared test
     rejects the true degree), the law then fitted at that degree from the fits as they were (its
     `stats["max_degree_r"]`: the calibration takes the same bound), with the spread to the next odd
     degree's law as a discrepancy of the degree choice (`stats["truncation_alternative"]`, added to the
     calibrated band). Where that degree is not lower, `coord` as it was. Returns `(coord, notes)`."""
-    probe = jax.device_get(coordinate(with_truncation(fits, xs, vs, ys, w, library), library, method="gls",
+    probe = jax.device_get(coordinate(with_truncation(fits, xs, vs, ys, w, library, band), library, method="gls",
                                       throw=False))
     k0, k = int(coord.stats["K_r"]), int(probe.stats["K_r"])
     if probe.result != RESULTS.successful or coord.result != RESULTS.successful or k >= k0:
@@ -595,7 +601,7 @@ def _truncation_degree(coord: Solution, fits: LocalFit, xs, vs, ys, w, library: 
 
 
 def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordination: str, mass: float, i: int,
-                    odd_only: bool = False, x_noise=None, rows: RowFilter | None = None):
+                    odd_only: bool = False, x_noise=None, rows: RowFilter | None = None, band=None, segs=None):
     """One DOF's coordination route (`reconstruct`'s `coordination`; "auto": the paper route, GLS,
     checked for inadmissible shapes and faults, replaced or complemented by the joint regression where
     the module's rules say so). `odd_only`: the GLS takes odd degrees only (a DOF that borrowed
@@ -608,7 +614,7 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
     energy = None if speed is None else 0.5 * float(mass) * speed**2  # the model's energy bound
     lowered = []  # why the degree was lowered: to confine a borrowed law, or by the truncation test
     if coordination == "joint":
-        coord = _joint(fits, xs, vs, ys, w, speed, x_noise=x_noise, rows=rows)
+        coord = _joint(fits, xs, vs, ys, w, speed, x_noise=x_noise, rows=rows, segs=segs)
     else:
         coord = jax.device_get(coordinate(fits, library, method="gls" if coordination == "auto" else coordination,
                                           confining=odd_only, throw=False))
@@ -617,17 +623,17 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
             coord, risk_notes = least_risk_degree(coord, fits, library, energy)
             lowered = lowered + risk_notes
         elif coordination == "auto":
-            coord, lowered = _truncation_degree(coord, fits, xs, vs, ys, w, library)
+            coord, lowered = _truncation_degree(coord, fits, xs, vs, ys, w, library, band)
         if coordination == "auto":
             faults = _paper_route_faults(coord, fits, xs, vs, ys, w, speed, library)
             why = faults["restoring"] + faults["damping"] + faults["data"] + faults["blowup"]
             paper = coord
             paper_sound = not faults["data"]
             if faults["data"]:
-                coord, route = _joint(fits, xs, vs, ys, w, speed, x_noise=x_noise, rows=rows), "joint"
+                coord, route = _joint(fits, xs, vs, ys, w, speed, x_noise=x_noise, rows=rows, segs=segs), "joint"
             elif faults["blowup"]:  # it explains the wells' data, its shape between them is the fault
                 coord, route = _joint(fits, xs, vs, ys, w, speed, settings=_replacement_settings(paper),
-                                      x_noise=x_noise, rows=rows), "joint"
+                                      x_noise=x_noise, rows=rows, segs=segs), "joint"
             else:
                 # A restoring shape that is inadmissible (even degree, turning outward, extra sign changes)
                 # is the paper's verdict only where redundant local data test it (the over-determined GLS:
@@ -666,14 +672,14 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                     unconfirmed = False
                 if unconfirmed:
                     cand = _joint(fits, xs, vs, ys, w, speed, settings=_replacement_settings(paper), x_noise=x_noise,
-                                  rows=rows)
+                                  rows=rows, segs=segs)
                     ok, reason = _joint_explains_as_well(cand, paper, xs, vs, ys, w)
                     if ok:
                         coord, route = cand, "joint"
                     else:
                         why = why + [f"kept: {reason}"]
                 if route == "gls" and faults["damping"]:
-                    coord, route = _joint(fits, xs, vs, ys, w, speed, restoring=paper, rows=rows), "gls + joint damping"
+                    coord, route = _joint(fits, xs, vs, ys, w, speed, restoring=paper, rows=rows, segs=segs), "gls + joint damping"
                 if route != "joint" and unconfirmed:
                     warnings += _sanity.check_escape_reach(i, np.asarray(paper.value.stiffness),
                                                            np.asarray(fits.equilibrium), energy)
@@ -703,7 +709,7 @@ def _eiv_report(x_noise, xs, w, applied) -> list[dict | None]:
     return out
 
 
-def _borrow(fits: LocalFit, plan: list[dict], xs, vs, ys, w, library: Library, x_noise=None):
+def _borrow(fits: LocalFit, plan: list[dict], xs, vs, ys, w, library: Library, x_noise=None, band=None):
     """Refit the wells of one DOF that borrow orders (`_shape_prior.refit_with_prior`); returns the
     fits and, per well, the orders borrowed."""
     eq = np.asarray(fits.equilibrium, float)
@@ -714,7 +720,8 @@ def _borrow(fits: LocalFit, plan: list[dict], xs, vs, ys, w, library: Library, x
         if borrow:
             coef[k], cov[k] = _shape_prior.refit_with_prior(
                 xs[k] - eq[k], vs[k], ys[k], w[k], library, coef[k], float(fits.rss[k]),
-                float(fits.n_samples[k]), span, borrow, x_noise=(x_noise or [None] * len(plan))[k])
+                float(fits.n_samples[k]), span, borrow, x_noise=(x_noise or [None] * len(plan))[k],
+                band=(band or [None] * len(plan))[k])
         borrowed.append(sorted(borrow))
     return eqx.tree_at(lambda f: (f.coef, f.covariance), fits, (coef, cov)), borrowed
 
@@ -780,7 +787,7 @@ def reconstruct(
     shared_damping: bool = True,
     extend_restoring: bool | None = None,
     shared_design: bool | None = None,
-    structured_noise: bool = False,
+    structured_noise: bool | None = None,
     errors_in_variables: bool = True,
     throw: bool = True,
     progress: Callable[[str], None] | None = None,
@@ -848,7 +855,7 @@ def reconstruct(
       (the paper's method as published). 5-cell Kresling chains: RESULTS.md, issue 15.
 
     - `structured_noise`: where accelerations are estimated (from x or v), take their noise for
-      what it is (opt-in; results/derived_noise.md): x'' leaves each sample out of its own window
+      what it is (results/derived_noise.md): x'' leaves each sample out of its own window
       (`Recording.complete(exclude_center=True)`; otherwise the filter's centre weight
       correlates the target's noise with the regressor x(t): shallow arch, x only, 30 dB, the
       local stiffness 2.5-4 % high), the first and last half-window (the edge fit's
@@ -859,15 +866,21 @@ def reconstruct(
       a scatter of 2-3 %). With it, each well's restoring series is also extended while the next
       order is resolved, up to the curvature q^2 (`extend_restoring`). (The joint regression runs
       on rows low-passed at 1.5 x the band edge wherever accelerations are estimated and no record is
-      a steady sine, with or without it: `_derived_rows`.) Shallow arch, x only, 0.45 % sweeps:
-      1.3-3.3 % restoring error from noise-free to 30 dB (the curvature oracle 2.6 %; without it
-      14.5 % at 45-60 dB, the cubic); magnetic bistable, x only: 18.5-20.8 % down to 45 dB (oracle
-      20.8 %; without it 45-56 %), at 30 dB 45 % either way; v only unchanged
-      (results/derived_accelerations.md). Not the default: made the default on swept records, it kept
-      small spurious damping terms (v, x v) on notebook 06's displacement-only joint records (40 dB),
-      from which `refine` made the holdout worse (5.49 -> 6.19 %; without it 6.70 -> 6.41 %). On steady
-      sines (bistable joint, 10 Hz, x only; results/joint_sine_records.md) it is better at 45-30 dB
-      (median 1.26 % against 5.69 %), worse at 60 dB; mixed on the single-tone arch.
+      a steady sine, with or without it: `_derived_rows`.) Default (None): on where every record's x
+      was integrated from a measured v (a laser vibrometer), off otherwise. Velocity only, shallow
+      arch, 0.45 % sweeps, 45 dB, seeds 0-1: F''/2 from the rows without the slow band
+      (`_slow.band_rows`) scatters by 0.82/1.77 where OLS gives standard errors of 4.6/5.6, so the
+      GLS took the cubic (14.6 % off); with it 4.43/1.20 % (the curvature oracle 2.6 %). Shallow arch,
+      x only, 0.45 % sweeps: 1.3-3.3 % restoring error from noise-free to 30 dB (without it 14.5 % at
+      45-60 dB, the cubic); magnetic bistable, x only: 18.5-20.8 % down to 45 dB (oracle 20.8 %;
+      without it 45-56 %), at 30 dB 45 % either way (results/derived_accelerations.md). Not the default
+      where x is measured: made the default on swept records, it kept small spurious damping terms (v,
+      x v) on notebook 06's displacement-only joint records (40 dB), from which `refine` made the
+      holdout worse (5.49 -> 6.19 %; without it 6.70 -> 6.41 %): the Savitzky-Golay filter's gain on the
+      third harmonic of the v^3 damping biases v^3 low and a linear v up, 2-5 OLS standard errors over
+      seeds with either covariance (a noise-free record: v 0.64 for 0, v^3 9.66 for 10). On steady sines
+      (bistable joint, 10 Hz, x only; results/joint_sine_records.md) it is better at 45-30 dB (median
+      1.26 % against 5.69 %), worse at 60 dB; mixed on the single-tone arch.
 
     - `errors_in_variables`: where x is measured with its accelerations (the noise of x and of
       the target are independent), each local fit is corrected for the white noise on x (its
@@ -908,6 +921,8 @@ def reconstruct(
                for r in recordings)
     if keep_restoring_order is None:
         keep_restoring_order = 3 if measured else (2 if once else 1)
+    if structured_noise is None:  # on where x was integrated from a measured v (`_slow.band_rows`)
+        structured_noise = all((r.integration or {}).get("from") == "v" for r in recordings)
     extend_upto = None
     if extend_restoring is None:  # estimated accelerations with their noise's structure: up to the curvature
         extend_restoring, extend_upto = (True, None) if measured else (structured_noise, 2)
@@ -919,12 +934,14 @@ def reconstruct(
     recs = [restore_slow(r, y) for r, y in zip(recs, targets)]
     stiff, vdamp, pdamp, se_s, se_v, se_p, covs, reports = [], [], [], [], [], [], [], []
     k1 = library.column(STIFFNESS, 1)  # restoring_order >= 1 (`Library`)
-    local, noises, x_noises, row_filters = [], [], [], []
+    local, noises, x_noises, row_filters, segs_all = [], [], [], [], []
     for i in range(d):
         _, labels, groups = wells[i]
         xs, w = _pad_stack([[recs[k].x[:, i] for k in g] for g in groups])
         if structured_noise:
             w = w * _pad_stack([[inner_samples(recs[k]) for k in g] for g in groups])[0]
+        if integrated_cut(recs, groups, i) is not None:  # the integration's ends left out (`_slow`)
+            w = w * _pad_stack([[e] for e in edge_weights(recs, groups)])[0]
         vs, _ = _pad_stack([[recs[k].v[:, i] for k in g] for g in groups])
         ys, _ = _pad_stack([[targets[k][:, i] for k in g] for g in groups])
         keep = low_order_terms(library, keep_restoring_order) if keep_low_orders else None
@@ -934,7 +951,9 @@ def reconstruct(
         x_noise = [None if (var := _noise.x_noise_variance(recs, grp, i) if errors_in_variables else None) is None
                    else jnp.asarray(var, float) for grp in groups]
         say(f"{f'DOF {i} ({i + 1}/{d}): ' if d > 1 else ''}local fits at {len(groups)} wells")
-        sols = jax.device_get(_fit_wells(xs, vs, ys, w, library, solver, select, keep, noise, x_noise))  # NumPy
+        # x integrated from v or a: the local regressions in the band above its drift cut-off (`_slow.band_rows`)
+        band = band_rows(recs, groups, i, w, targets, library)
+        sols = jax.device_get(_fit_wells(xs, vs, ys, w, library, solver, select, keep, noise, x_noise, band))
         fits: LocalFit = sols.value
         eiv = _eiv_report(x_noise, xs, w, sols.stats.get("eiv_applied"))
         if screen_sigma is not None:
@@ -945,15 +964,16 @@ def reconstruct(
         dropped = []
         if shared_damping:
             fits, dropped = _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_sigma, i,
-                                                    failure, noise, x_noise)
+                                                    failure, noise, x_noise, band)
         added = [[] for _ in groups]
         if extend_restoring and screen_sigma is not None:
             fits, added = _extend_restoring(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure, noise,
-                                            x_noise, extend_upto)
-        local.append((labels, groups, xs, vs, ys, w, fits, dropped, added, eiv))
+                                            x_noise, extend_upto, band)
+        local.append((labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band))
         # estimated accelerations: the joint regression on low-passed rows (`row_filter`; shallow arch, x only,
         # 30 dB, 0.45 % sweeps, seeds 0-1: 8.31/8.81 % on raw rows, degree 13; 1.35/6.11 % filtered, degree 7)
         row_filters.append(None if measured else _derived_rows(recs, groups, i))
+        segs_all.append(segments(recs, groups, i))
         noises.append(noise)
         x_noises.append(x_noise)
     # cells of one design: the well-excited cells lend the curvature the weakly excited ones miss
@@ -964,15 +984,15 @@ def reconstruct(
         plan, design = _shape_prior.share_curvature([loc[6] for loc in local], library,
                                                     screen_sigma if screen_sigma is not None else 3.0)
     for i in range(d):
-        labels, groups, xs, vs, ys, w, fits, dropped, added, eiv = local[i]
+        labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band = local[i]
         data_fits = fits  # the local fits from the data alone (reported; the resolution report reads them)
         borrowed, design_why = [], None
         if plan[i] is not None:
-            fits, borrowed = _borrow(fits, plan[i], xs, vs, ys, w, library, x_noises[i])
+            fits, borrowed = _borrow(fits, plan[i], xs, vs, ys, w, library, x_noises[i], band)
         say(f"{f'DOF {i} ({i + 1}/{d}): ' if d > 1 else ''}coordination ({coordination})")
         coord, route, why, paper_sound, confining, found = _coordinate_dof(
             fits, xs, vs, ys, w, library, coordination, float(masses[i]), i, odd_only=any(borrowed),
-            x_noise=x_noises[i], rows=row_filters[i])
+            x_noise=x_noises[i], rows=row_filters[i], band=band, segs=segs_all[i])
         if any(borrowed) and route == "joint":
             # the law with the borrowed orders was inadmissible and the joint regression (which sees
             # only this cell's data) would replace it: the cell goes on alone (torque-free Kresling,
@@ -981,7 +1001,7 @@ def reconstruct(
             fits, borrowed = data_fits, []
             coord, route, why, paper_sound, confining, found = _coordinate_dof(
                 fits, xs, vs, ys, w, library, coordination, float(masses[i]), i, x_noise=x_noises[i],
-                rows=row_filters[i])
+                rows=row_filters[i], band=band, segs=segs_all[i])
         warnings += found
         if coord.result != RESULTS.successful:
             failure.note(coord.result, f"DOF {i}: coordination of the equilibria "

@@ -41,6 +41,7 @@ import jax.scipy.special as jsp
 import numpy as np
 
 from .._fit._errors_in_variables import compressed_problem
+from .._fit._stls import compress
 from .._fit._library import STIFFNESS, Library
 from .._fit._local_fit import with_constant
 from .._trace_cache import disk_traced
@@ -244,21 +245,25 @@ def share_curvature(fits_per_dof, library: Library, n_sigma: float):
     return plan, summary
 
 
-def refit_with_prior(q, v, y, w, library: Library, coef, rss, n_samples, span, borrow, x_noise=None):
+def refit_with_prior(q, v, y, w, library: Library, coef, rss, n_samples, span, borrow, x_noise=None, band=None):
     """One well's local fit refitted on its own data with the borrowed orders as a Gaussian
     prior (`share_curvature`): support = the fit's own plus the borrowed q^m; the data rows
     weighted by the fit's residual variance, one prior row per borrowed order,
     (a_m - rho a_1 / L^(m-1)) / (sd |a_1| / L^(m-1)). The data enter compressed (R, z of the
     library's QR), corrected for the noise on x where `x_noise` (its variance) is given, as the
-    local fit was (`_errors_in_variables`). Returns (coef, covariance): the posterior mean and
+    local fit was (`_errors_in_variables`), or as the rows above an integrated x's drift cut-off where
+    `band` (`BandRows`) is given. Returns (coef, covariance): the posterior mean and
     covariance (NumPy)."""
     idx = library.indices(STIFFNESS)  # q^0 .. q^r, in order
     support = with_constant(np.asarray(coef) != 0, library)  # the force at the mean moves with the curvature
     for m in borrow:
         support[idx[m]] = True
     cols = np.nonzero(support)[0]
-    qr = _compressed(*(jnp.asarray(a, float) for a in (q, v, y, w)), library,
-                     None if x_noise is None else jnp.asarray(x_noise, float))
+    if band is not None:
+        qr = compress(band.theta, band.y, jnp.asarray(w, float))
+    else:
+        qr = _compressed(*(jnp.asarray(a, float) for a in (q, v, y, w)), library,
+                         None if x_noise is None else jnp.asarray(x_noise, float))
     theta, y = np.asarray(qr.r, float)[:, cols], np.asarray(qr.z, float)
     n_data = int(np.sum(np.asarray(coef) != 0))
     sigma = np.sqrt(max(float(rss), 1e-300) / max(float(n_samples) - n_data, 1.0))

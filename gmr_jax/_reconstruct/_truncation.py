@@ -25,12 +25,13 @@ from .._fit._local_fit import LocalFit
 
 
 def sensitivity(coef: np.ndarray, q: np.ndarray, v: np.ndarray, y: np.ndarray, w: np.ndarray,
-                library: Library):
+                library: Library, band=None):
     """(delta, t2) of one well: delta (terms,) the change of its kept coefficients (`coef`'s support)
     when the restoring term one order above its highest joins them, both fitted by weighted least squares
     on the well's samples (q = x - equilibrium), and t2 that term's squared t statistic (OLS); delta
     delta' / t2 is then the covariance delta adds (delta = g c, c the new coefficient). Zeros (t2 = inf)
-    where that fit is rank-deficient."""
+    where that fit is rank-deficient. `band`: the well's rows above an integrated x's drift cut-off
+    (`BandRows`): the fits run on them; zeros where q^(r+1) is beyond the library (no band column)."""
     coef = np.asarray(coef, float)
     zero = (np.zeros_like(coef), np.inf)
     support = coef != 0
@@ -41,8 +42,14 @@ def sensitivity(coef: np.ndarray, q: np.ndarray, v: np.ndarray, y: np.ndarray, w
     on = w > 0
     if top < 1 or np.count_nonzero(on) <= np.count_nonzero(support) + 1:
         return zero
-    theta = np.asarray(library(jnp.asarray(q[on]), jnp.asarray(v[on])))[:, support]
-    extra = q[on, None] ** (top + 1)
+    if band is not None:
+        if top + 1 > int(orders.max()):
+            return zero
+        full = np.asarray(band.theta, float)[on]
+        theta, extra, y = full[:, support], full[:, idx[top + 1], None], np.asarray(band.y, float)
+    else:
+        theta = np.asarray(library(jnp.asarray(q[on]), jnp.asarray(v[on])))[:, support]
+        extra = q[on, None] ** (top + 1)
     sw = np.sqrt(w[on])[:, None]
     a1, b = np.hstack([theta, extra]) * sw, y[on] * sw[:, 0]
     norm = np.linalg.norm(a1, axis=0)
@@ -61,13 +68,14 @@ def sensitivity(coef: np.ndarray, q: np.ndarray, v: np.ndarray, y: np.ndarray, w
     return out, (sol1[-1] ** 2 / var_c if var_c > 0 and sol1[-1] != 0 else np.inf)  # c = 0: delta = 0
 
 
-def with_truncation(fits: LocalFit, xs, vs, ys, w, library: Library) -> LocalFit:
+def with_truncation(fits: LocalFit, xs, vs, ys, w, library: Library, band=None) -> LocalFit:
     """`fits` as the next restoring order would have them: each well's coefficients moved by delta and
     its covariance grown by delta delta' / t2 (`sensitivity`)."""
     coef = np.asarray(fits.coef, float)
     eq = np.asarray(fits.equilibrium, float)
     xs, vs, ys, w = (np.asarray(a, float) for a in (xs, vs, ys, w))
-    out = [sensitivity(coef[k], xs[k] - eq[k], vs[k], ys[k], w[k], library) for k in range(coef.shape[0])]
+    band = band or [None] * coef.shape[0]
+    out = [sensitivity(coef[k], xs[k] - eq[k], vs[k], ys[k], w[k], library, band[k]) for k in range(coef.shape[0])]
     deltas = np.stack([d for d, _ in out])
     t2 = np.array([t for _, t in out])
     cov = np.asarray(fits.covariance, float) + deltas[:, :, None] * deltas[:, None, :] / t2[:, None, None]
