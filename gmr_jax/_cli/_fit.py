@@ -41,7 +41,8 @@ def register(sub):
     f.add_argument("--structured-noise", action=argparse.BooleanOptionalAction, default=None,
                    help="where accelerations are estimated (x only, v only, x and v): take their noise for what it "
                    "is (the differentiation filter's) and resolve the curvature at each well (default: on where x "
-                   "was integrated from v, off otherwise; results/derived_accelerations.md)")
+                   "was integrated from v or the records are sweeps, off on steady sines and measured "
+                   "accelerations; results/derived_accelerations.md)")
     f.add_argument("--restoring-order", "-r", type=positive_int, default=5)
     f.add_argument("--damping-order", "-d", type=positive_int, default=5)
     f.add_argument("--threshold", default="auto", help="STLS threshold on normalised coefficients, or 'auto' "

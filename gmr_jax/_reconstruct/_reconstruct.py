@@ -29,6 +29,7 @@ from . import _design_law, _noise, _resolution, _sanity, _shape_prior
 from ._degree import (averaged_parts, confine_borrowed, degree, least_risk_degree, mixture, odd_degree, odd_gls,
                       redundancy)
 from ._sanity import GMRDataWarning
+from . import _slow
 from ._slow import band_rows, edge_weights, integrated_cut, restore_slow, segments
 from ._truncation import with_truncation
 
@@ -316,25 +317,55 @@ def velocity_terms_not_shared(coef: np.ndarray, library: Library) -> np.ndarray:
 
 def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_sigma, dof, failure, noise=None,
                             x_noise=None, band=None):
-    """Drop the position-independent damping terms not selected at every well and refit the
-    wells that had them (on their support less those terms, at their own threshold), until
-    every remaining term is shared. Returns the fits and the dropped orders j."""
+    """One set of position-independent damping terms for every well (Eq. 21). Where the wells'
+    fits selected different sets, each well is refitted (its own other terms, at its own threshold)
+    with each candidate set: every well's own selection, their union and their intersection; the
+    set with the least summed BIC over the wells wins (sum of n log(rss / n) + p log n). Terms still
+    unshared after the t-screen are then dropped and the wells that had them refitted, until every
+    remaining term is shared. Returns the fits and the dropped orders j.
+
+    The intersection alone (the rule before) dropped a well's correct law where the other well's fit
+    had taken a collinear stand-in: bistable joint, x only, 40 dB, 0.5 degree sweeps, seed 4 with
+    `structured_noise`: v^3 at one well, v at the other; both dropped, the damping fitted as 18.7 v,
+    97 % off over the box."""
     dropped, noise, x_noise = [], noise or [None] * xs.shape[0], x_noise or [None] * xs.shape[0]
     band = band or [None] * xs.shape[0]
+    coef0 = np.asarray(fits.coef)
+    vd = np.array([phys == VELOCITY_DAMPING and k != 1 for phys, k in library.terms()])
+
+    def refit(k, support, thr):
+        slv = eqx.tree_at(lambda s: s.threshold, solver, thr)
+        sol = fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=keep,
+                        support=jnp.asarray(support), noise=noise[k], x_noise=x_noise[k], band=band[k], throw=False)
+        if sol.result != RESULTS.successful:
+            failure.note(sol.result, f"DOF {dof}, well {k}: refit with the shared damping terms")
+        new = jax.tree.map(lambda a: np.asarray(a)[None], sol.value)
+        return _screen(new, screen_sigma, library) if screen_sigma is not None else new
+
+    if np.any(velocity_terms_not_shared(coef0, library)):
+        sets = {tuple(bool(b) for b in ((coef0[k] != 0) & vd)) for k in range(coef0.shape[0])}
+        sets |= {tuple(bool(b) for b in (np.any(coef0 != 0, axis=0) & vd)),
+                 tuple(bool(b) for b in (np.all(coef0 != 0, axis=0) & vd))}
+        best = None
+        for cand in sorted(sets):
+            cand = np.array(cand)
+            new_fits, score = fits, 0.0
+            for k in range(coef0.shape[0]):
+                support = with_constant((coef0[k] != 0) & ~vd, library) | cand
+                new = refit(k, support, fits.threshold[k])
+                rss, n = float(new.rss[0]), float(new.n_samples[0])
+                score += n * np.log(max(rss, 1e-300) / max(n, 1.0)) + np.count_nonzero(new.coef[0]) * np.log(max(n, 2.0))
+                new_fits = _set_well(new_fits, k, new)
+            if np.isfinite(score) and (best is None or score < best[0]):
+                best = (score, new_fits, cand)
+        if best is not None:
+            fits = best[1]
+            dropped += [k for (_, k), d in zip(library.terms(), np.any(coef0 != 0, axis=0) & vd & ~best[2]) if d]
     while np.any(drop := velocity_terms_not_shared(coef := np.asarray(fits.coef), library)):
         for k in np.nonzero(np.any((coef != 0) & drop[None, :], axis=1))[0]:
-            slv = eqx.tree_at(lambda s: s.threshold, solver, fits.threshold[k])
-            sol = fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=keep,
-                            support=jnp.asarray(with_constant(coef[k] != 0, library) & ~drop), noise=noise[k],
-                            x_noise=x_noise[k], band=band[k], throw=False)
-            if sol.result != RESULTS.successful:
-                failure.note(sol.result, f"DOF {dof}, well {k}: refit without unshared damping terms")
-            new = jax.tree.map(lambda a: np.asarray(a)[None], sol.value)
-            if screen_sigma is not None:
-                new = _screen(new, screen_sigma, library)
-            fits = _set_well(fits, k, new)
+            fits = _set_well(fits, k, refit(k, with_constant(coef[k] != 0, library) & ~drop, fits.threshold[k]))
         dropped += [k for (_, k), d in zip(library.terms(), drop) if d]
-    return fits, sorted(dropped)
+    return fits, sorted(set(dropped))
 
 
 def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failure, noise=None, x_noise=None,
@@ -466,6 +497,12 @@ def _joint_explains_as_well(joint: Solution, paper: Solution, xs, vs, ys, w) -> 
 
 #: `_derived_rows`: a record with this share of its power at one line is a steady sine (`tonal_fraction`)
 TONAL = 0.95
+
+
+def _steady_sines(recordings) -> bool:
+    """Whether a recording is a steady sine in some DOF (`tonal_fraction` >= `TONAL`)."""
+    return any(tonal_fraction(r.x[:, i], r.dt) >= TONAL for r in recordings if r.x is not None
+               for i in range(r.x.shape[1]) if np.ptp(r.x[:, i]) > 0)
 
 
 def _derived_rows(recs, groups, i: int) -> RowFilter | None:
@@ -867,20 +904,22 @@ def reconstruct(
       order is resolved, up to the curvature q^2 (`extend_restoring`). (The joint regression runs
       on rows low-passed at 1.5 x the band edge wherever accelerations are estimated and no record is
       a steady sine, with or without it: `_derived_rows`.) Default (None): on where every record's x
-      was integrated from a measured v (a laser vibrometer), off otherwise. Velocity only, shallow
-      arch, 0.45 % sweeps, 45 dB, seeds 0-1: F''/2 from the rows without the slow band
-      (`_slow.band_rows`) scatters by 0.82/1.77 where OLS gives standard errors of 4.6/5.6, so the
-      GLS took the cubic (14.6 % off); with it 4.43/1.20 % (the curvature oracle 2.6 %). Shallow arch,
-      x only, 0.45 % sweeps: 1.3-3.3 % restoring error from noise-free to 30 dB (without it 14.5 % at
-      45-60 dB, the cubic); magnetic bistable, x only: 18.5-20.8 % down to 45 dB (oracle 20.8 %;
-      without it 45-56 %), at 30 dB 45 % either way (results/derived_accelerations.md). Not the default
-      where x is measured: made the default on swept records, it kept small spurious damping terms (v,
-      x v) on notebook 06's displacement-only joint records (40 dB), from which `refine` made the
-      holdout worse (5.49 -> 6.19 %; without it 6.70 -> 6.41 %): the Savitzky-Golay filter's gain on the
-      third harmonic of the v^3 damping biases v^3 low and a linear v up, 2-5 OLS standard errors over
-      seeds with either covariance (a noise-free record: v 0.64 for 0, v^3 9.66 for 10). On steady sines
-      (bistable joint, 10 Hz, x only; results/joint_sine_records.md) it is better at 45-30 dB (median
-      1.26 % against 5.69 %), worse at 60 dB; mixed on the single-tone arch.
+      was integrated from a measured v (a laser vibrometer), and where accelerations are estimated and
+      no record is a steady sine (`tonal_fraction`); off otherwise. Velocity only, shallow arch, 0.45 %
+      sweeps, 45 dB, seeds 0-1: F''/2 from the rows without the slow band (`_slow.band_rows`) scatters
+      by 0.82/1.77 where OLS gives standard errors of 4.6/5.6, so the GLS took the cubic (14.6 % off);
+      with it 4.43/1.20 % (the curvature oracle 2.6 %). Shallow arch, x only, 0.45 % sweeps: 1.3-3.3 %
+      from noise-free to 30 dB (without it 14.5 % at 45-60 dB, the cubic); magnetic bistable, x only:
+      18.5-18.6 % at 60-45 dB (oracle 20.8 %; without it 45 %), at 30 dB 45 % either way
+      (results/derived_accelerations.md). It became the default on sweeps once the rows pass through
+      the differentiation filter's gain (`_slow.filter_gain`) and the wells share their damping terms
+      by BIC (`_share_velocity_damping`): before, on notebook 06's displacement-only joint records (40
+      dB), the filter's gain on the third harmonic of the v^3 damping biased v^3 low and a linear v up
+      (2-5 OLS standard errors over seeds; a noise-free record: v 0.64 for 0, v^3 9.66 for 10), the
+      model kept spurious v and x v terms and `refine` made the holdout worse (5.49 -> 6.19 %). Now
+      0.040 % restoring and 0.13 % damping error there (the default before: 0.135 % and 4.64 %). On
+      steady sines (bistable joint, 10 Hz, x only; results/joint_sine_records.md) it is better at
+      45-30 dB, worse at 60 dB, and stays opt-in there.
 
     - `errors_in_variables`: where x is measured with its accelerations (the noise of x and of
       the target are independent), each local fit is corrected for the white noise on x (its
@@ -921,8 +960,9 @@ def reconstruct(
                for r in recordings)
     if keep_restoring_order is None:
         keep_restoring_order = 3 if measured else (2 if once else 1)
-    if structured_noise is None:  # on where x was integrated from a measured v (`_slow.band_rows`)
-        structured_noise = all((r.integration or {}).get("from") == "v" for r in recordings)
+    if structured_noise is None:  # on where x was integrated from a measured v, or on swept records
+        structured_noise = (all((r.integration or {}).get("from") == "v" for r in recordings)
+                            or (not measured and not _steady_sines(recordings)))
     extend_upto = None
     if extend_restoring is None:  # estimated accelerations with their noise's structure: up to the curvature
         extend_restoring, extend_upto = (True, None) if measured else (structured_noise, 2)
@@ -940,6 +980,8 @@ def reconstruct(
         xs, w = _pad_stack([[recs[k].x[:, i] for k in g] for g in groups])
         if structured_noise:
             w = w * _pad_stack([[inner_samples(recs[k]) for k in g] for g in groups])[0]
+        if not structured_noise and not measured and _slow.MATCHED:  # the edge fits' rows: not the taps' gain
+            w = w * _pad_stack([[inner_samples(recs[k]) for k in g] for g in groups])[0]
         if integrated_cut(recs, groups, i) is not None:  # the integration's ends left out (`_slow`)
             w = w * _pad_stack([[e] for e in edge_weights(recs, groups)])[0]
         vs, _ = _pad_stack([[recs[k].v[:, i] for k in g] for g in groups])
@@ -952,7 +994,7 @@ def reconstruct(
                    else jnp.asarray(var, float) for grp in groups]
         say(f"{f'DOF {i} ({i + 1}/{d}): ' if d > 1 else ''}local fits at {len(groups)} wells")
         # x integrated from v or a: the local regressions in the band above its drift cut-off (`_slow.band_rows`)
-        band = band_rows(recs, groups, i, w, targets, library)
+        band = band_rows(recs, groups, i, w, targets, library, masses, topology)
         sols = jax.device_get(_fit_wells(xs, vs, ys, w, library, solver, select, keep, noise, x_noise, band))
         fits: LocalFit = sols.value
         eiv = _eiv_report(x_noise, xs, w, sols.stats.get("eiv_applied"))
