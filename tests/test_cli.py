@@ -287,3 +287,25 @@ def test_fast_compile_flags_only_before_jax_starts(monkeypatch):
     __import__("jax").numpy.zeros(1).block_until_ready()  # started in this process
     monkeypatch.setenv("XLA_FLAGS", "")
     assert fast_compile_flags() is False and os.environ["XLA_FLAGS"] == ""
+
+
+def test_fit_structured_noise_flag_reaches_reconstruct(monkeypatch, tmp_path):
+    """`gmr fit`: no flag leaves `structured_noise` to the default (on for sweeps with estimated
+    accelerations and for velocity-only records), `--structured-noise` / `--no-structured-noise`
+    force it; the call is intercepted (no fit)."""
+    s = g.systems.bistable_joint("position_independent")
+    paths = []
+    for r in g.systems.make_recordings(s, np.deg2rad(1.0), snr_db=40.0, seed=0, duration=2.0):
+        paths.append(str(tmp_path / f"{r.name}.npz"))
+        np.savez(paths[-1], t=r.t, x=r.x, base_acc=r.base_acc)
+    seen = []
+
+    def fake(*args, **kwargs):
+        seen.append(kwargs.get("structured_noise", "default"))
+        raise SystemExit(0)
+
+    monkeypatch.setattr(g, "reconstruct", fake)
+    for flags, expected in (([], "default"), (["--structured-noise"], True), (["--no-structured-noise"], False)):
+        with pytest.raises(SystemExit):
+            main(["fit", *paths, "--out", str(tmp_path / "m.json"), "--no-figure", *flags])
+        assert seen[-1] == expected, (flags, seen)

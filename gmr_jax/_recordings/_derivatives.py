@@ -57,6 +57,11 @@ def band_edge(x: np.ndarray, dt: float, fraction: float = 0.995) -> float:
     return float(freqs[min(int(np.searchsorted(c, fraction)), freqs.size - 1)])
 
 
+#: a record with this share of its power at one line is a steady sine (`tonal_fraction`; `reconstruct`'s
+#: row filter, structured noise and the damping columns' gain are off there)
+TONAL = 0.95
+
+
 def tonal_fraction(x: np.ndarray, dt: float) -> float:
     """Share of the power of x (mean removed) within 5 % (at least 3 bins) of its spectral peak: near 1
     for the steady response to a sine (0.998-1 on the single-tone records of `studies/single_tone.py`),
