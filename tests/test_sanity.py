@@ -329,12 +329,13 @@ def test_11_uncertainty_of_the_global_restoring_force_matches_sampling():
 
 @pytest.mark.slow  # a full reconstruction
 def test_11_noisy_nes_is_warned_and_really_is_off():
-    """NES at 20 dB, seed 0, 5 s records: the restoring force is 4 % off the truth (0.03 % at 60 dB),
-    and the warning says the data determine it only to ±6.5 % (clean data: silent, above)."""
+    """NES at 20 dB, seed 0, 5 s records: the restoring force is 1.7 % off the truth (4 % before stop 40's
+    damping terms shared by BIC; 0.03 % at 60 dB), and the warning says the data determine it only to
+    ±3.8 % (clean data: silent, above)."""
     s = g.systems.tristable_nes()
     recs = g.systems.make_recordings(s, 5e-4, snr_db=20.0, seed=0, duration=DURATION)
     sol, msgs = _fit(recs)
     err = g.metrics.restoring_error(sol.value, s.truth, 0, s.x_range[0])
     assert _has(msgs, "DOF 0: the data determine the global restoring force only to ±"), msgs
     rel = float(next(m for m in msgs if "determine the global" in m).split("±")[1].split(" %")[0]) / 100
-    assert err > 0.02 and rel > 0.02 and err < 5 * rel, (err, rel)
+    assert err > 0.01 and rel > 0.02 and err < 5 * rel, (err, rel)
