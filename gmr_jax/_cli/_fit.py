@@ -168,7 +168,9 @@ def run(args) -> int:
     for line in format_shared_design(design):
         print(line)
     for name, sc in st["training"].items():
-        print(f"  training {name}: R2 {np.round(sc['r2'], 5).tolist()}, NRMSE {np.round(sc['nrmse'], 5).tolist()}")
+        band = "" if not any(b is not None for b in sc.get("r2_in_band") or []) else (
+            f" (R2 in the response's band {[None if b is None else round(b, 5) for b in sc['r2_in_band']]})")
+        print(f"  training {name}: R2 {np.round(sc['r2'], 5).tolist()}, NRMSE {np.round(sc['nrmse'], 5).tolist()}{band}")
     if "resolution" in st:
         print("What each well's data resolved (and the excitation that would resolve what they did not):")
         print(str(st["resolution"]))

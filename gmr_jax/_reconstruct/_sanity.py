@@ -361,13 +361,18 @@ def check_fit_quality(training: dict) -> list[str]:
     orders on displacement-only 10 Hz sine records of the joint: -2e8 (2 noise seeds of 12;
     the blow-up of rule 9 flags all 12); records swinging across the NES wells: -4e12.
 
-    `training`: recording name -> {"r2": [per DOF], ...}."""
+    `training`: recording name -> {"r2": [per DOF], ...}; where a DOF's accelerations were estimated
+    on a sweep, its "r2_in_band" (both forces low-passed alike, `training_scores`) is judged instead.
+    """
     out = []
     for name, sc in training.items():
+        band = sc.get("r2_in_band") or [None] * len(sc["r2"])
         for i, r2 in enumerate(sc["r2"]):
+            what = "R²" if band[i] is None else "R² in the response's band"
+            r2 = band[i] if band[i] is not None else r2
             if not np.isfinite(r2) or r2 < MIN_R2:
                 out.append(
-                    f"{name} (DOF {i}): the model explains its own training data poorly (R² {_g(r2)}, "
+                    f"{name} (DOF {i}): the model explains its own training data poorly ({what} {_g(r2)}, "
                     f"below {MIN_R2}); do not trust it: lower the library orders (-r/-d), check that the "
                     f"record is a small vibration with its input recorded"
                 )
