@@ -91,25 +91,28 @@ def test_reconstruct_from_velocity_only_keeps_the_curvature(arch_v):
 
 
 def test_rows_without_the_slow_band_keep_the_mean_and_the_vibration():
-    """`without_slow`: a slow creep below the cut-off goes, the mean and a tone above it stay
+    """`remove_drift(..., keep_mean=True)`: a slow creep below the cut-off goes, the mean and a tone above it stay
     (against the signal's own parts); `band_rows` is None where x was measured."""
-    from gmr_jax._reconstruct._slow import band_rows, without_slow
+    from gmr_jax._reconstruct._slow import band_rows, segments
 
     dt, n = 0.01, 6000
     t = np.arange(n) * dt
     tone = np.sin(2 * np.pi * 2.0 * t)
     creep = 0.3 * np.cos(2 * np.pi * t / (2 * n * dt) * 3)  # 3 half-periods: 0.025 Hz
-    out = without_slow(1.5 + tone + creep, dt, 0.2)
+    out = remove_drift(1.5 + tone + creep, dt, 0.2, keep_mean=True)
     assert abs(out.mean() - (1.5 + tone + creep).mean()) < 1e-12
     inner = slice(n // 20, n - n // 20)  # the ends left out, as the fits leave them (`EDGE`)
     assert np.max(np.abs(out - out.mean() - tone)[inner]) < 0.02  # measured 1.4 % (the sine's leakage)
-    cols = without_slow(np.stack([tone + creep, np.ones(n)], axis=1), dt, 0.2)
+    cols = remove_drift(np.stack([tone + creep, np.ones(n)], axis=1), dt, 0.2, keep_mean=True)
     assert np.allclose(cols[:, 1], 1.0) and np.allclose(cols[:, 0], out - 1.5)
     s = g.systems.shallow_arch()
     full = g.systems.make_recordings(s, 8.34e-4, snr_db=None, seed=0, duration=5.0)
     done, masses, topology, _ = _resolve(full, None, None)
     y = [np.asarray(regression_targets(r, masses, topology)) for r in done]
-    assert band_rows(done, [[0], [1]], 0, np.ones((2, done[0].n_samples)), y, g.Library(3, 1)) is None
+    groups = [[0], [1]]
+    assert segments(done, groups, 0) is None
+    assert band_rows(done, groups, 0, np.ones((2, done[0].n_samples)), y, g.Library(3, 1), masses, topology,
+                     segments(done, groups, 0)) is None
 
 
 def test_a_csv_column_repeating_the_equilibrium_is_taken_as_it(tmp_path):

@@ -30,7 +30,7 @@ from ._degree import (averaged_parts, confine_borrowed, degree, least_risk_degre
                       redundancy)
 from ._sanity import GMRDataWarning
 from . import _slow
-from ._slow import band_rows, edge_weights, integrated_cut, restore_slow, segments
+from ._slow import band_rows, edge_weights, restore_slow, segments
 from ._truncation import with_truncation
 
 #: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
@@ -323,12 +323,17 @@ def _stack(trees):
     return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *trees)
 
 
+def _shared_law_terms(library: Library) -> np.ndarray:
+    """Mask of the position-independent damping terms sgn(v)|v|^j, j != 1 (one law for every well, Eq. 21;
+    j = 1 is the damping polynomial's C(0) v)."""
+    return np.array([phys == VELOCITY_DAMPING and k != 1 for phys, k in library.terms()])
+
+
 def velocity_terms_not_shared(coef: np.ndarray, library: Library) -> np.ndarray:
     """Mask of the position-independent damping terms sgn(v)|v|^j, j != 1, that some wells'
     local fits selected and others did not (`coef`: (wells, terms))."""
     nonzero = coef != 0
-    vd = np.array([phys == VELOCITY_DAMPING and k != 1 for phys, k in library.terms()])
-    return vd & np.any(nonzero, axis=0) & ~np.all(nonzero, axis=0)
+    return _shared_law_terms(library) & np.any(nonzero, axis=0) & ~np.all(nonzero, axis=0)
 
 
 def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_sigma, dof, failure, noise=None,
@@ -336,9 +341,10 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
     """One set of position-independent damping terms for every well (Eq. 21). Where the wells'
     fits selected different sets, each well is refitted (its own other terms, at its own threshold)
     with each candidate set: every well's own selection, their union, their intersection, none and
-    each term of the union alone; the set with the least summed BIC over the wells wins (sum of n log(rss / n) + p log n). Terms still
-    unshared after the t-screen are then dropped and the wells that had them refitted, until every
-    remaining term is shared. Returns the fits and the dropped orders j.
+    each term of the union alone; the set with the least summed BIC over the wells wins (sum of
+    n log(rss / n) + p log n). Terms still unshared after the t-screen are then dropped and the wells
+    that had them refitted, until every remaining term is shared. Returns the fits and the dropped
+    orders j.
 
     The intersection alone (the rule before) dropped a well's correct law where the other well's fit
     had taken a collinear stand-in: bistable joint, x only, 40 dB, 0.5 degree sweeps, seed 4 with
@@ -347,7 +353,7 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
     dropped, noise, x_noise = [], noise or [None] * xs.shape[0], x_noise or [None] * xs.shape[0]
     band = band or [None] * xs.shape[0]
     coef0 = np.asarray(fits.coef)
-    vd = np.array([phys == VELOCITY_DAMPING and k != 1 for phys, k in library.terms()])
+    vd = _shared_law_terms(library)
 
     def refit(k, support, thr):
         """Well k refitted on `support` and t-screened; refitted once more on what the screen kept (a
@@ -371,11 +377,10 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
 
     kept = np.zeros(vd.size, bool) if keep is None else np.asarray(keep, bool)  # the low orders (v, x v, ...)
     if np.any(velocity_terms_not_shared(coef0, library)):
-        sets = {tuple(bool(b) for b in ((coef0[k] != 0) & vd)) for k in range(coef0.shape[0])}
         union = np.any(coef0 != 0, axis=0) & vd
-        sets |= {tuple(bool(b) for b in union), tuple(bool(b) for b in (np.all(coef0 != 0, axis=0) & vd)),
-                 tuple(False for _ in vd)}
-        sets |= {tuple(bool(b) for b in (np.arange(vd.size) == j)) for j in np.nonzero(union)[0]}  # one term alone
+        masks = [(c != 0) & vd for c in coef0] + [union, np.all(coef0 != 0, axis=0) & vd, np.zeros_like(vd)]
+        masks += [np.arange(vd.size) == j for j in np.nonzero(union)[0]]  # one term alone
+        sets = {tuple(bool(b) for b in m) for m in masks}
         best = None
         for cand in sorted(sets):
             cand = np.array(cand)
@@ -390,7 +395,7 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
                 best = (score, new_fits, cand)
         if best is not None:
             fits = best[1]
-            dropped += [k for (_, k), d in zip(library.terms(), np.any(coef0 != 0, axis=0) & vd & ~best[2]) if d]
+            dropped += [k for (_, k), d in zip(library.terms(), union & ~best[2]) if d]
     while np.any(drop := velocity_terms_not_shared(coef := np.asarray(fits.coef), library)):
         for k in np.nonzero(np.any((coef != 0) & drop[None, :], axis=1))[0]:
             fits = _set_well(fits, k, refit(k, (with_constant(coef[k] != 0, library) | kept) & ~drop, fits.threshold[k]))
@@ -526,10 +531,11 @@ def _joint_explains_as_well(joint: Solution, paper: Solution, xs, vs, ys, w) -> 
 
 
 
-def _steady_sines(recordings) -> bool:
-    """Whether a recording is a steady sine in some DOF (`tonal_fraction` >= `TONAL`)."""
+def _steady_sines(recordings, dofs=None) -> bool:
+    """Whether a recording is a steady sine in some DOF (of `dofs`, default all; `tonal_fraction` >=
+    `TONAL`)."""
     return any(tonal_fraction(r.x[:, i], r.dt) >= TONAL for r in recordings if r.x is not None
-               for i in range(r.x.shape[1]) if np.ptp(r.x[:, i]) > 0)
+               for i in (range(r.x.shape[1]) if dofs is None else dofs) if np.ptp(r.x[:, i]) > 0)
 
 
 def _derived_rows(recs, groups, i: int) -> RowFilter | None:
@@ -543,7 +549,7 @@ def _derived_rows(recs, groups, i: int) -> RowFilter | None:
     dts = np.array([r.dt for r in members])
     if np.ptp(dts) > 1e-6 * dts.max():
         return None
-    if any(tonal_fraction(r.x[:, i], r.dt) >= TONAL for r in members):
+    if _steady_sines(members, [i]):
         return None
     edge = max(band_edge(r.x[:, i], r.dt) for r in members)
     return row_filter(float(dts[0]), edge) if edge > 0 else None
@@ -1005,11 +1011,10 @@ def reconstruct(
     for i in range(d):
         _, labels, groups = wells[i]
         xs, w = _pad_stack([[recs[k].x[:, i] for k in g] for g in groups])
-        if structured_noise:
+        if structured_noise or (_slow.MATCHED and not measured):  # the edge fits' rows: not the taps' gain
             w = w * _pad_stack([[inner_samples(recs[k]) for k in g] for g in groups])[0]
-        if not structured_noise and not measured and _slow.MATCHED:  # the edge fits' rows: not the taps' gain
-            w = w * _pad_stack([[inner_samples(recs[k]) for k in g] for g in groups])[0]
-        if integrated_cut(recs, groups, i) is not None:  # the integration's ends left out (`_slow`)
+        segs = segments(recs, groups, i)  # x integrated: each record's slow band (`_slow`)
+        if segs is not None:  # the integration's ends left out
             w = w * _pad_stack([[e] for e in edge_weights(recs, groups)])[0]
         vs, _ = _pad_stack([[recs[k].v[:, i] for k in g] for g in groups])
         ys, _ = _pad_stack([[targets[k][:, i] for k in g] for g in groups])
@@ -1021,7 +1026,7 @@ def reconstruct(
                    else jnp.asarray(var, float) for grp in groups]
         say(f"{f'DOF {i} ({i + 1}/{d}): ' if d > 1 else ''}local fits at {len(groups)} wells")
         # x integrated from v or a: the local regressions in the band above its drift cut-off (`_slow.band_rows`)
-        band = band_rows(recs, groups, i, w, targets, library, masses, topology)
+        band = band_rows(recs, groups, i, w, targets, library, masses, topology, segs)
         sols = jax.device_get(_fit_wells(xs, vs, ys, w, library, solver, select, keep, noise, x_noise, band))
         fits: LocalFit = sols.value
         eiv = _eiv_report(x_noise, xs, w, sols.stats.get("eiv_applied"))
@@ -1042,7 +1047,7 @@ def reconstruct(
         # estimated accelerations: the joint regression on low-passed rows (`row_filter`; shallow arch, x only,
         # 30 dB, 0.45 % sweeps, seeds 0-1: 8.31/8.81 % on raw rows, degree 13; 1.35/6.11 % filtered, degree 7)
         row_filters.append(None if measured else _derived_rows(recs, groups, i))
-        segs_all.append(segments(recs, groups, i))
+        segs_all.append(segs)
         noises.append(noise)
         x_noises.append(x_noise)
     # cells of one design: the well-excited cells lend the curvature the weakly excited ones miss

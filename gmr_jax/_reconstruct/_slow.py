@@ -48,7 +48,7 @@ def _band_fit(q, v, y, dt, f_hp):
     """The local law k1 q + k2 q^2 + k3 q^3 + c1 v + c2 v|v| fitted in the band above f_hp: its
     coefficients and t values."""
     cols = np.stack([q, q**2, q**3, v, v * np.abs(v)], axis=1)
-    hp = np.stack([remove_drift(c, dt, f_hp) for c in cols.T], axis=1)
+    hp = remove_drift(cols, dt, f_hp)
     yh = remove_drift(y, dt, f_hp)
     n = q.size
     inner = slice(int(EDGE * n), n - int(EDGE * n))
@@ -103,19 +103,6 @@ def restore_slow(rec: Recording, targets: np.ndarray) -> Recording:
     return replace(rec, x=x, integration={**info, "slow_restored": report})
 
 
-
-def without_slow(y: np.ndarray, dt: float, f_hp: float) -> np.ndarray:
-    """y (N,) or (N, p) without its content between 0 and `f_hp` along axis 0, the mean kept (the
-    cosine transform of `remove_drift`, its k = 0 term spared): the band where an integrated x is
-    missing its slow part, the static balance (the mean) left in."""
-    from scipy.fft import dct, idct
-
-    c = dct(np.asarray(y, float), type=2, norm="ortho", axis=0)
-    k = np.arange(c.shape[0]) / (2.0 * c.shape[0] * dt)
-    c[(k > 0) & (k < f_hp)] = 0.0
-    return idct(c, type=2, norm="ortho", axis=0)
-
-
 def integrated_cut(recs, groups, i: int) -> list[float] | None:
     """The drift cut-off (Hz) of DOF `i`'s integrated x in each recording of its wells (`groups`,
     in their order), or None unless every one of them had x integrated (`Recording.integration`)."""
@@ -163,11 +150,11 @@ def edge_weights(recs, groups) -> list[np.ndarray]:
 
 
 def apply_band(segs, a: np.ndarray) -> np.ndarray:
-    """`a` (samples, ...) of one well with each record's slow band removed (`without_slow`), padding
-    left as it is."""
+    """`a` (samples, ...) of one well with each record's slow band removed (`remove_drift` with the mean
+    kept), padding left as it is."""
     out = np.array(a, float)
     for start, stop, dt, cut in segs:
-        out[start:stop] = without_slow(out[start:stop], dt, cut)
+        out[start:stop] = remove_drift(out[start:stop], dt, cut, keep_mean=True)
     return out
 
 
@@ -214,40 +201,39 @@ def _taps(rec):
     return savgol_taps(windows.pop(), how["polyorder"], how["order"], rec.dt, how["exclude_center"]), how["order"]
 
 
-def band_rows(recs, groups, i: int, w: np.ndarray, targets, library, masses=None, topology=None):
+def band_rows(recs, groups, i: int, w: np.ndarray, targets, library, masses, topology, segs):
     """Per well of DOF `i`, the `BandRows` of its local regression: the library columns at the well's
     centre (the `w`-weighted mean of x, as `fit_local` takes it) and the target `targets[k][:, i]`,
-    padded like the rows, where the records' accelerations were estimated (`masses`, `topology`
-    given) or x integrated; None where neither holds.
+    padded like the rows, where the records' accelerations were estimated or x integrated (`segs`,
+    from `segments`); None where neither holds.
 
     Estimated accelerations (one Savitzky-Golay window for every DOF of a record, `_taps`): the
-    target holds G[x''], G the filter's gain (`filter_gain`), so the columns pass through G too and
-    the target's measured inputs (base acceleration, forces) as well; the equation then holds
-    exactly. On the raw columns the gain's shortfall on the harmonics of a nonlinear term reads as
-    other terms: bistable joint, x only, noise-free 0.5 degree sweep, a [1, q, q^2, q^3, v, v^3] fit gives
-    q^3 28000 for 1755, v 0.64 for 0 and v^3 9.66 for 10; through G 2236, 0.002 and 9.999 (the rest from
-    the estimated v); with the true v exact.
+    target holds G[x''], G the filter's gain (`filter_gain`), so the columns pass through G too
+    (all but q's, `RAW_LINEAR`) and the target's measured inputs (base acceleration, forces) as well;
+    the equation then holds but for (G - 1) F' q, a stiffness shift of the filter's shortfall at the
+    well's frequency. On the raw columns the gain's shortfall on the harmonics of a nonlinear term
+    reads as other terms: bistable joint, x only, noise-free 0.5 degree sweep, a [1, q, q^2, q^3, v,
+    v^3] fit gives q^3 28000 for 1755, v 0.64 for 0 and v^3 9.66 for 10; through G 2236, 0.002 and
+    9.999 (the rest from the estimated v); with the true v exact.
 
     Integrated x: the columns and the target lose their record's slow band (between 0 and the drift
-    cut-off, the mean kept: `without_slow`).
-
-    The integration removed that band from x, and restore_slow puts back only its k2 q^2 part; a
-    regression on all rows takes the curvature from it (q^2's slow part follows the envelope of a
-    sweep): shallow arch, velocity only, 0.45 % of the interwell distance, noise-free, local F''/2
-    -26.6 and 22.1 (30 and 12 standard errors off) against the truth's -23.85 and 23.72; without the
-    slow band -23.85 and 23.74 (within 1 standard error)."""
+    cut-off, the mean kept: `remove_drift(..., keep_mean=True)`). The integration removed that band
+    from x, and `restore_slow` puts back only its k2 q^2 part; a regression on all rows takes the
+    curvature from it (q^2's slow part follows the envelope of a sweep): shallow arch, velocity only,
+    0.45 % of the interwell distance, noise-free, local F''/2 -26.6 and 22.1 (30 and 12 standard
+    errors off) against the truth's -23.85 and 23.72; without the slow band -23.85 and 23.74 (within
+    1 standard error)."""
     import jax.numpy as jnp
 
+    from .._fit._library import STIFFNESS
     from .._fit._local_fit import BandRows
     from .._topology import as_topology
 
-    from .._fit._library import STIFFNESS
-
-    k1 = library.column(STIFFNESS, 1)
-    segs = segments(recs, groups, i)
-    gains = [[_taps(recs[k]) if masses is not None else None for k in grp] for grp in groups]
+    gains = [[_taps(recs[k]) for k in grp] for grp in groups]
     if segs is None and not any(gn is not None for row in gains for gn in row):
         return None
+    k1 = library.column(STIFFNESS, 1)
+    topo, masses = as_topology(topology), np.asarray(masses, float)
     out = []
     for g, grp in enumerate(groups):
         n_g = sum(recs[k].n_samples for k in grp)
@@ -264,9 +250,7 @@ def band_rows(recs, groups, i: int, w: np.ndarray, targets, library, masses=None
             if gains[g][m] is not None:  # the columns through the target's filter, the inputs too
                 taps, order = gains[g][m]
                 b, f = r.inputs()
-                d = r.n_dof
-                u = np.asarray(as_topology(topology).carried(f - np.asarray(masses, float)[None, :]
-                                                             * as_topology(topology).absolute(np.zeros((r.n_samples, d)), b)))[:, i]
+                u = np.asarray(topo.carried(f - masses[None, :] * topo.absolute(np.zeros_like(r.x), b)))[:, i]
                 raw = th
                 th = filter_gain(th, taps, order, r.dt)
                 if RAW_LINEAR:
@@ -274,7 +258,7 @@ def band_rows(recs, groups, i: int, w: np.ndarray, targets, library, masses=None
                 yk = yk + filter_gain(u, taps, order, r.dt) - u
             if segs is not None:
                 _, _, dt, cut = segs[g][m]
-                th, yk = without_slow(th, dt, cut), without_slow(yk, dt, cut)
+                th, yk = remove_drift(th, dt, cut, keep_mean=True), remove_drift(yk, dt, cut, keep_mean=True)
             theta[start:start + r.n_samples], y[start:start + r.n_samples] = th, yk
             start += r.n_samples
         out.append(BandRows(theta=jnp.asarray(theta), y=jnp.asarray(y)))

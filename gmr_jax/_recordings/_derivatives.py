@@ -58,7 +58,7 @@ def band_edge(x: np.ndarray, dt: float, fraction: float = 0.995) -> float:
 
 
 #: a record with this share of its power at one line is a steady sine (`tonal_fraction`; `reconstruct`'s
-#: row filter, structured noise and the damping columns' gain are off there)
+#: row filter and its default structured noise are off there)
 TONAL = 0.95
 
 

@@ -53,17 +53,19 @@ def highpass_cutoff(s: np.ndarray, dt: float, times: int = 1) -> float:
     return float(min(max(HP_FRACTION * low_edge(s, dt, FLOOR_RATIO**times), 3.0 / (n * dt)), 0.2 / dt))
 
 
-def remove_drift(y: np.ndarray, dt: float, f_hp: float) -> np.ndarray:
-    """y (N,) without its content below `f_hp`: the cosine-transform (DCT-II) coefficients of
-    frequency k / (2 N dt) < f_hp are zeroed. The DCT is the Fourier series of the record
-    extended by its mirror image, which is continuous at both ends: no edge transient (a
-    recursive high-pass this far below the sampling rate rings for most of a record), no phase."""
+def remove_drift(y: np.ndarray, dt: float, f_hp: float, keep_mean: bool = False) -> np.ndarray:
+    """y (N,) or (N, p) without its content below `f_hp`, along axis 0: the cosine-transform (DCT-II)
+    coefficients of frequency k / (2 N dt) < f_hp are zeroed (with `keep_mean`, all but k = 0: the
+    band between 0 and `f_hp` goes, the mean stays; `_reconstruct/_slow.band_rows`). The DCT is the
+    Fourier series of the record extended by its mirror image, which is continuous at both ends: no
+    edge transient (a recursive high-pass this far below the sampling rate rings for most of a
+    record), no phase."""
     from scipy.fft import dct, idct
 
-    c = dct(np.asarray(y, float), type=2, norm="ortho")
-    k = np.arange(c.size) / (2.0 * c.size * dt)
-    c[k < f_hp] = 0.0
-    return idct(c, type=2, norm="ortho")
+    c = dct(np.asarray(y, float), type=2, norm="ortho", axis=0)
+    k = np.arange(c.shape[0]) / (2.0 * c.shape[0] * dt)
+    c[(k < f_hp) & ((k > 0) if keep_mean else True)] = 0.0
+    return idct(c, type=2, norm="ortho", axis=0)
 
 
 def detrend(y: np.ndarray, degree: int) -> np.ndarray:
