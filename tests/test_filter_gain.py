@@ -57,3 +57,39 @@ def test_displacement_only_sweeps_keep_the_true_damping_law():
     kinds = {(t["physics"], t["order"]) for t in model.terms() if t["coefficient"] != 0}
     assert ("velocity_damping", 1) not in kinds and not any(p == "position_damping" for p, _ in kinds), kinds
     assert g.metrics.restoring_error(model, s.truth, 0, xr) < 0.002  # measured 0.033 %
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_joint_regression_on_steady_sines_takes_the_gain(seed, monkeypatch):
+    """Bistable joint, x only, the steady response to a 10 Hz base sine about each well, 45 dB
+    (`studies/joint_sine_records.py`): the joint regression's target holds G[x''] (its rows are not
+    low-passed on a sine, the harmonics carry the nonlinearity), so its columns pass through G too
+    (`_slow.gain_segments`). Seeds 0 and 2: 0.268 and 0.291 % on raw columns, 0.020 and 0.027 %
+    through G, against the truth's cubic (NumPy)."""
+    import jax
+    import jax.numpy as jnp
+
+    from gmr_jax._reconstruct import _slow
+
+    joint = g.systems.bistable_joint()
+    ts = jnp.arange(5001) / 1000.0
+    inp = g.BaseSine(np.deg2rad(1.0), 10.0)
+    base = np.asarray(jax.vmap(lambda t: inp(t)[0])(ts))
+    rng = np.random.default_rng(seed)
+    recs = [g.Recording(t=np.asarray(ts), x=g.add_noise(np.asarray(g.simulate(joint.truth, inp, ts, xe).value[0]), 45.0,
+                                                        rng), base_acc=base, masses=np.ones(1), name=f"sine_S{i + 1}")
+            for i, xe in enumerate(joint.equilibria)]
+    grid = np.linspace(-1.5, 1.5, 301) * float(np.max(joint.equilibria))
+    truth = np.polynomial.polynomial.polyval(grid, [0.0, g.systems.JOINT_STIFFNESS[0], 0.0, g.systems.JOINT_STIFFNESS[1]])
+
+    def error():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sol = g.reconstruct(recs, throw=False)
+        assert sol.stats["dofs"][0].stats["coordination"] == "joint"
+        fit = np.polynomial.polynomial.polyval(grid, np.asarray(sol.value.stiffness[0]))
+        return np.linalg.norm(fit - truth) / np.linalg.norm(truth)
+
+    assert error() < 1e-3  # measured 0.020 / 0.027 %
+    monkeypatch.setattr(_slow, "JOINT_GAIN", False)
+    assert error() > 2e-3  # raw columns: 0.268 / 0.291 %: the test has teeth

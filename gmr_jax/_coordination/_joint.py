@@ -332,6 +332,7 @@ def joint_coordinate(
     x_noise: Float[Array, " wells"] | None = None,
     rows: "RowFilter | None" = None,
     band=None,
+    gain=None,
 ):
     """The joint coordination of one DOF (module docstring).
 
@@ -360,6 +361,9 @@ def joint_coordinate(
     `band`: where x was integrated, per well its records' (start, stop, dt, drift cut-off)
     (`_reconstruct/_slow.segments`): each record's rows lose their content between 0 and its cut-off
     (the mean kept), where the integrated x misses its slow part (`_slow.band_rows`).
+    `gain`: where the accelerations were estimated, per well its records' filter gains
+    (`_reconstruct/_slow.gain_segments`): every column passes through its record's gain G, as the
+    target holds G[x''] (`ys` then holds the inputs through G too, `_slow.matched_targets`).
     """
     xs, vs, ys, weights = (np.asarray(a, float) for a in (xs, vs, ys, weights))
     raw = (xs, vs, ys, weights, x_noise)
@@ -371,6 +375,11 @@ def joint_coordinate(
     w = weights / np.asarray(well_variance, float).reshape(-1, 1)
     u = (xs - c) / (2.0 * h)
     cols = np.asarray(layout.columns(jnp.asarray(u), jnp.asarray(vs)))  # (wells, samples, p)
+    if gain is not None:
+        from .._reconstruct._slow import apply_gain
+
+        cols = np.stack([apply_gain(segs, cols[k]) for k, segs in enumerate(gain)])
+        x_noise = None  # the corrected score is per raw column
     if band is not None:
         from .._reconstruct._slow import apply_band
 
@@ -421,7 +430,7 @@ def joint_coordinate(
         fine = tuple(np.unique(np.concatenate([grid, 0.5 * (grid[1:] + grid[:-1])])).tolist())
         return joint_coordinate(*raw[:4], equilibria, well_variance, speed,
                                 dataclasses.replace(settings, log_lambdas=fine), refine=False, x_noise=raw[4], rows=rows,
-                                band=band)
+                                band=band, gain=gain)
     if settings.tie > 0 and admissible.any():
         near = np.nonzero(score <= score[best] + settings.tie)[0]
         best = int(min(near, key=lambda i: (max(meta[i][2], default=1), meta[i][0], meta[i][1], score[i])))

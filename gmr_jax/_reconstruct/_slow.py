@@ -167,6 +167,10 @@ MATCHED = True
 RAW_LINEAR = True
 
 
+#: the joint regression's columns through the gain as well (`gain_segments`; False: raw columns, as before)
+JOINT_GAIN = True
+
+
 def filter_gain(sig: np.ndarray, taps: np.ndarray, order: int, dt: float) -> np.ndarray:
     """`sig` (N,) or (N, p) through the gain G(w) = H(w) / (i w)^order of the Savitzky-Golay taps of
     a derivative of `order` (H their frequency response; G(0) = 1): what the differentiation did to the
@@ -199,6 +203,61 @@ def _taps(rec):
     if len(windows) != 1:
         return None
     return savgol_taps(windows.pop(), how["polyorder"], how["order"], rec.dt, how["exclude_center"]), how["order"]
+
+
+def gain_segments(recs, groups) -> list[list[tuple]] | None:
+    """Per well, its records' (start, stop, dt, taps, order) within the well's concatenated rows
+    where the record's accelerations were estimated through one Savitzky-Golay window (`_taps`), None
+    in the list where not; None where no record of any well was: the joint regression's columns
+    pass through that gain (`_coordination/_joint.joint_coordinate`'s `gain`, `apply_gain`)."""
+    out, any_gain = [], False
+    for grp in groups:
+        start, segs = 0, []
+        for k in grp:
+            n, tg = recs[k].n_samples, _taps(recs[k])
+            segs.append(None if tg is None else (start, start + n, float(recs[k].dt), tg[0], tg[1]))
+            any_gain |= tg is not None
+            start += n
+        out.append(segs)
+    return out if any_gain else None
+
+
+def apply_gain(segs, a: np.ndarray) -> np.ndarray:
+    """`a` (samples, ...) of one well with each record's rows through its filter's gain (`filter_gain`;
+    `segs` one well's list from `gain_segments`), padding and records without one left as they are."""
+    out = np.array(a, float)
+    for seg in segs:
+        if seg is not None:
+            start, stop, dt, taps, order = seg
+            out[start:stop] = filter_gain(out[start:stop], taps, order, dt)
+    return out
+
+
+def _inputs(rec, i: int, masses, topology) -> np.ndarray:
+    """The measured inputs (base acceleration, forces) in DOF `i`'s target (N,)."""
+    b, f = rec.inputs()
+    return np.asarray(topology.carried(f - masses[None, :] * topology.absolute(np.zeros_like(rec.x), b)))[:, i]
+
+
+def matched_targets(recs, groups, i: int, targets, masses, topology, width: int) -> np.ndarray:
+    """(wells, `width`) DOF `i`'s targets padded like the rows, the measured inputs of each record
+    with estimated accelerations through its filter's gain (the target then holds G[x''] and G[u]:
+    `band_rows`, and the joint regression with `gain_segments`)."""
+    from .._topology import as_topology
+
+    topo, masses = as_topology(topology), np.asarray(masses, float)
+    out = np.zeros((len(groups), width))
+    for g, grp in enumerate(groups):
+        start = 0
+        for k in grp:
+            r, tg = recs[k], _taps(recs[k])
+            yk = np.asarray(targets[k][:, i], float)
+            if tg is not None:
+                u = _inputs(r, i, masses, topo)
+                yk = yk + filter_gain(u, tg[0], tg[1], r.dt) - u
+            out[g, start:start + r.n_samples] = yk
+            start += r.n_samples
+    return out
 
 
 def band_rows(recs, groups, i: int, w: np.ndarray, targets, library, masses, topology, segs):
@@ -249,8 +308,7 @@ def band_rows(recs, groups, i: int, w: np.ndarray, targets, library, masses, top
             yk = np.asarray(targets[k][:, i], float)
             if gains[g][m] is not None:  # the columns through the target's filter, the inputs too
                 taps, order = gains[g][m]
-                b, f = r.inputs()
-                u = np.asarray(topo.carried(f - masses[None, :] * topo.absolute(np.zeros_like(r.x), b)))[:, i]
+                u = _inputs(r, i, masses, topo)
                 raw = th
                 th = filter_gain(th, taps, order, r.dt)
                 if RAW_LINEAR:
