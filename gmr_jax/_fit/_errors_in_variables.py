@@ -88,6 +88,20 @@ def corrected_qr(
     delta = sum(jnp.where(jnp.asarray(pair == n), jnp.einsum("t,ta,tb->ab", dq[:, n], wg, g), 0.0)
                 for n in np.unique(pair) if n >= 2)  # D_0 = D_1 = 0
     small = jnp.einsum("ta,ta,t->a", dq[:, m], wg, y)
+    return _moment_corrected(qr, delta, small, variance)
+
+
+def shifted_qr(qr: QRData, cross: Float[Array, " terms"]) -> QRData:
+    """The compressed problem with its normal equations' right side Θ'Wy less `cross` (the expected
+    product of the columns' noise with the target's, where both hold the same sensor's noise:
+    `_reconstruct/_slow.band_rows`); `qr` where that is not finite."""
+    out, _ = _moment_corrected(qr, jnp.zeros((cross.size, cross.size), qr.r.dtype), cross, jnp.zeros(()))
+    return out
+
+
+def _moment_corrected(qr: QRData, delta, small, variance):
+    """`qr` with M = R'R, b = R'z corrected to M - delta, b - small (`corrected_qr`), and whether it
+    could be."""
     norms = column_norms(qr)
     norms = jnp.where(norms > 0, norms, 1.0)
     rn = qr.r / norms[None, :]
@@ -118,4 +132,4 @@ def compressed_problem(
     return qr if variance is None else corrected_qr(qr, q, v, y, weights, library, variance)[0]
 
 
-__all__ = ["compressed_problem", "corrected_qr", "hermite_excess", "powers_and_factors"]
+__all__ = ["compressed_problem", "corrected_qr", "hermite_excess", "powers_and_factors", "shifted_qr"]

@@ -9,7 +9,7 @@ from jaxtyping import Array, Bool, Float
 from .._solution import RESULTS, Solution, error_if_failed
 from .._trace_cache import disk_traced
 from ._library import STIFFNESS, Library
-from ._errors_in_variables import corrected_qr
+from ._errors_in_variables import corrected_qr, shifted_qr
 from ._stls import STLS, compress, coefficient_covariance, residual_sum_of_squares, stls_qr
 from ._target_noise import TargetNoise, structured_covariance
 from ._threshold import default_thresholds, select_threshold
@@ -32,6 +32,9 @@ class BandRows(eqx.Module):
 
     theta: Float[Array, "samples terms"]
     y: Float[Array, " samples"]
+    #: the expected product of each column's noise with the target's, summed with the weights, where both
+    #: hold the noise of one sensor (x, differentiated for the target): Θ'Wy's bias, taken off (None: none)
+    cross: Float[Array, " terms"] | None = None
 
 
 class LocalFit(eqx.Module):
@@ -97,15 +100,15 @@ def fit_local(
         cv = {}
     qr = compress(theta, y, weights)
     extra = {"eiv_applied": jnp.asarray(False)}  # in every fit's stats: wells with and without stack alike
-    fit_qr = qr
+    fit_qr = qr if band is None or band.cross is None else shifted_qr(qr, band.cross)
     if x_noise is not None:
-        fit_qr, extra["eiv_applied"] = corrected_qr(qr, x - xe, v, y, w, library, jnp.asarray(x_noise, float))
+        fit_qr, extra["eiv_applied"] = corrected_qr(fit_qr, x - xe, v, y, w, library, jnp.asarray(x_noise, float))
     sol = stls_qr(fit_qr, solver, initial_mask=support)
     if keep is not None:
         refit = eqx.tree_at(lambda s: (s.threshold, s.alpha), solver, (jnp.zeros(()), jnp.zeros(())))
         mask = sol.stats["support"] | keep
         sol = stls_qr(fit_qr, refit, initial_mask=mask if support is None else mask & support)
-    if x_noise is not None:  # the recorded samples' residual (the corrected problem's is smaller)
+    if fit_qr is not qr:  # the recorded samples' residual (the corrected problem's is smaller)
         sol.stats["rss"] = residual_sum_of_squares(qr, sol.value)
     cov = coefficient_covariance(qr, sol.value, sol.stats["support"])
     if noise is not None:

@@ -565,7 +565,7 @@ def _joint(fits: LocalFit, xs, vs, ys, w, speed: float, restoring: Solution | No
     of rows whose target holds estimated accelerations (`row_filter`). `segs`: per well, its records'
     slow bands where x was integrated (`_slow.segments`), taken out of the rows. `gain`: where the
     accelerations were estimated, `(segments, ys)`: per well its records' filter gains
-    (`_slow.gain_segments`), through which the columns pass, and the targets with their inputs through
+    (`_slow.gain_segments`, from x only), through which the columns pass, and the targets with their inputs through
     them (`_slow.matched_targets`), which replace `ys`."""
     eq = np.asarray(fits.equilibrium)
     gain_segs = None
