@@ -1,5 +1,5 @@
 """The local fits on estimated accelerations take the differentiation filter's gain on both sides
-(`_reconstruct/_slow.filter_gain`, `band_rows`), and the wells share their damping terms by BIC
+(`_reconstruct/_filter_gain.filter_gain`, `_slow.band_rows`), and the wells share their damping terms by BIC
 (`_reconstruct._share_velocity_damping`). Checked against scipy's Savitzky-Golay filter and
 against the simulated truth (NumPy, not the tool's numbers)."""
 
@@ -10,7 +10,7 @@ import pytest
 
 import gmr_jax as g
 from gmr_jax._recordings._derivatives import differentiate, savgol_taps
-from gmr_jax._reconstruct._slow import filter_gain
+from gmr_jax._reconstruct._filter_gain import filter_gain
 
 
 @pytest.mark.parametrize("order", [1, 2])
@@ -64,12 +64,12 @@ def test_joint_regression_on_steady_sines_takes_the_gain(seed, monkeypatch):
     """Bistable joint, x only, the steady response to a 10 Hz base sine about each well, 45 dB
     (`studies/joint_sine_records.py`): the joint regression's target holds G[x''] (its rows are not
     low-passed on a sine, the harmonics carry the nonlinearity), so its columns pass through G too
-    (`_slow.gain_segments`). Seeds 0 and 2: 0.268 and 0.291 % on raw columns, 0.020 and 0.027 %
+    (`_filter_gain.gain_segments`). Seeds 0 and 2: 0.268 and 0.291 % on raw columns, 0.020 and 0.027 %
     through G, against the truth's cubic (NumPy)."""
     import jax
     import jax.numpy as jnp
 
-    from gmr_jax._reconstruct import _slow
+    from gmr_jax._reconstruct import _filter_gain
 
     joint = g.systems.bistable_joint()
     ts = jnp.arange(5001) / 1000.0
@@ -91,20 +91,20 @@ def test_joint_regression_on_steady_sines_takes_the_gain(seed, monkeypatch):
         return np.linalg.norm(fit - truth) / np.linalg.norm(truth)
 
     assert error() < 1e-3  # measured 0.020 / 0.027 %
-    monkeypatch.setattr(_slow, "JOINT_GAIN", False)
+    monkeypatch.setattr(_filter_gain, "JOINT_GAIN", False)
     assert error() > 2e-3  # raw columns: 0.268 / 0.291 %: the test has teeth
 
 
 @pytest.mark.parametrize("exclude_center", [False, True])
 def test_cross_moment_is_the_noise_the_columns_share_with_the_target(exclude_center):
-    """`_slow.cross_moment` (the expected product of each column's noise with the target's, x only)
+    """`_filter_gain.cross_moment` (the expected product of each column's noise with the target's, x only)
     against a Monte Carlo over 400 noise draws of the same record (NumPy): the columns q (raw and
     through G) and q^3 (through G) within 5 % of the Monte Carlo mean (measured 1-2 %), q^2 and v^3
     (v estimated from x: its noise enters through the first-derivative taps) within the draws'
     resolution; the raw q with the centre tap left out shares none."""
     from gmr_jax._fit._library import STIFFNESS
     from gmr_jax._reconstruct._reconstruct import regression_targets
-    from gmr_jax._reconstruct._slow import _taps, cross_moment
+    from gmr_jax._reconstruct._filter_gain import _taps, cross_moment
 
     dt, n, window, sd = 0.01, 3000, 31, 2e-3
     t = np.arange(n) * dt

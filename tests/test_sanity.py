@@ -230,12 +230,12 @@ def test_9_global_shape_outside_and_between_the_data(nes_swinging):
 
 def test_10_default_orders_on_sinusoidal_records(joint, monkeypatch):
     """Displacement-only records of a steady 10 Hz sine. On the raw library columns (the local fits
-    before `_slow.filter_gain`) the default (5, 5) library gives an 11th-degree global law that blows
+    before `_filter_gain.filter_gain`) the default (5, 5) library gives an 11th-degree global law that blows
     up between the wells (rule 9, every noise seed tried) and, for this seed, misses its own data
     (rule 7, R² -2e8): the checks must say so, and the default must reject that law. With the
     columns through the differentiation filter's gain (the default), the local fits are right and
     the law is within 1 % of the truth, with no fault warned."""
-    from gmr_jax._reconstruct import _slow
+    from gmr_jax._reconstruct import _filter_gain
 
     ts = jnp.arange(int(DURATION * 1000) + 1) / 1000.0
     inp = g.BaseSine(np.deg2rad(1.0), 10.0)
@@ -257,7 +257,7 @@ def test_10_default_orders_on_sinusoidal_records(joint, monkeypatch):
     assert error(sol) < 0.01, error(sol)  # measured 0.29 % (15 % on the raw columns)
     assert not _has(msgs, "poorly") and not _has(msgs, "blew up") and not _has(msgs, "spurious")
     with monkeypatch.context() as m:
-        m.setattr(_slow, "MATCHED", False)
+        m.setattr(_filter_gain, "MATCHED", False)
         sol, msgs = _fit(recs, coordination="gls")
         assert sol.stats["dofs"][0].stats["K_r"] == 11
         assert _has(msgs, "sine_S2 (DOF 0): the model explains its own training data poorly (R² -")

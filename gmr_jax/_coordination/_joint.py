@@ -362,8 +362,8 @@ def joint_coordinate(
     (`_reconstruct/_slow.segments`): each record's rows lose their content between 0 and its cut-off
     (the mean kept), where the integrated x misses its slow part (`_slow.band_rows`).
     `gain`: where the accelerations were estimated, per well its records' filter gains
-    (`_reconstruct/_slow.gain_segments`): every column passes through its record's gain G, as the
-    target holds G[x''] (`ys` then holds the inputs through G too, `_slow.matched_targets`).
+    (`_reconstruct/_filter_gain.gain_segments`): every column passes through its record's gain G, as the
+    target holds G[x''] (`ys` then holds the inputs through G too, `_filter_gain.matched_targets`).
     """
     xs, vs, ys, weights = (np.asarray(a, float) for a in (xs, vs, ys, weights))
     raw = (xs, vs, ys, weights, x_noise)
@@ -376,7 +376,7 @@ def joint_coordinate(
     u = (xs - c) / (2.0 * h)
     cols = np.asarray(layout.columns(jnp.asarray(u), jnp.asarray(vs)))  # (wells, samples, p)
     if gain is not None:
-        from .._reconstruct._slow import apply_gain
+        from .._reconstruct._filter_gain import apply_gain
 
         cols = np.stack([apply_gain(segs, cols[k]) for k, segs in enumerate(gain)])
         x_noise = None  # the corrected score is per raw column

@@ -29,8 +29,9 @@ from . import _design_law, _noise, _resolution, _sanity, _shape_prior
 from ._degree import (averaged_parts, confine_borrowed, degree, least_risk_degree, mixture, odd_degree, odd_gls,
                       redundancy)
 from ._sanity import GMRDataWarning
-from . import _slow
-from ._slow import apply_gain, band_rows, edge_weights, gain_segments, matched_targets, restore_slow, segments
+from . import _filter_gain
+from ._filter_gain import apply_gain, gain_segments, matched_targets
+from ._slow import band_rows, edge_weights, restore_slow, segments
 from ._truncation import with_truncation
 
 #: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
@@ -586,8 +587,8 @@ def _joint(fits: LocalFit, xs, vs, ys, w, speed: float, restoring: Solution | No
     of rows whose target holds estimated accelerations (`row_filter`). `segs`: per well, its records'
     slow bands where x was integrated (`_slow.segments`), taken out of the rows. `gain`: where the
     accelerations were estimated, `(segments, ys)`: per well its records' filter gains
-    (`_slow.gain_segments`, from x only), through which the columns pass, and the targets with their inputs through
-    them (`_slow.matched_targets`), which replace `ys`."""
+    (`_filter_gain.gain_segments`, from x only), through which the columns pass, and the targets with their inputs through
+    them (`_filter_gain.matched_targets`), which replace `ys`."""
     eq = np.asarray(fits.equilibrium)
     gain_segs = None
     if gain is not None:
@@ -983,7 +984,7 @@ def reconstruct(
       from noise-free to 30 dB (without it 14.5 % at 45-60 dB, the cubic); magnetic bistable, x only:
       18.5-18.6 % at 60-45 dB (oracle 20.8 %; without it 45 %), at 30 dB 45 % either way
       (results/derived_accelerations.md). It became the default on sweeps once the rows pass through
-      the differentiation filter's gain (`_slow.filter_gain`) and the wells share their damping terms
+      the differentiation filter's gain (`_filter_gain.filter_gain`) and the wells share their damping terms
       by BIC (`_share_velocity_damping`): before, on notebook 06's displacement-only joint records (40
       dB), the filter's gain on the third harmonic of the v^3 damping biased v^3 low and a linear v up
       (2-5 OLS standard errors over seeds; a noise-free record: v 0.64 for 0, v^3 9.66 for 10), the
@@ -1049,7 +1050,7 @@ def reconstruct(
     for i in range(d):
         _, labels, groups = wells[i]
         xs, w = _pad_stack([[recs[k].x[:, i] for k in g] for g in groups])
-        if structured_noise or (_slow.MATCHED and not measured):  # the edge fits' rows: not the taps' gain
+        if structured_noise or (_filter_gain.MATCHED and not measured):  # the edge fits' rows: not the taps' gain
             w = w * _pad_stack([[inner_samples(recs[k]) for k in g] for g in groups])[0]
         segs = segments(recs, groups, i)  # x integrated: each record's slow band (`_slow`)
         if segs is not None:  # the integration's ends left out
@@ -1066,14 +1067,14 @@ def reconstruct(
         # x integrated from v or a: the local regressions in the band above its drift cut-off (`_slow.band_rows`)
         band = band_rows(recs, groups, i, w, targets, library, masses, topology, segs)
         # estimated accelerations: the joint regression's columns through the filter's gain, as the local fits'
-        # (`_slow.gain_segments`), where its rows are not low-passed (steady sines: the harmonics carry the
+        # (`_filter_gain.gain_segments`), where its rows are not low-passed (steady sines: the harmonics carry the
         # nonlinearity, where G < 1). Single-tone arch, x only, 50/30 dB, seeds 0-1: 1.99/1.99/5.68/5.18 % on raw
         # columns, 0.96/1.16/2.68/2.36 % through G (seed 1 at 50 dB hops 0.067 -> 0.95 times a second, the
         # truth 0.967); joint 10 Hz sines, 45 dB: 0.27-0.29 -> 0.02-0.03 %. Low-passed rows keep the band where
         # G is about 1, and G there only spreads the noise of x (arch, x only, sweeps, 60 dB, seeds 0-2: 1.34/
         # 1.38/1.12 % raw, 2.55/2.06/1.67 % through G)
         row_filters.append(None if measured else _derived_rows(recs, groups, i))
-        gsegs = gain_segments(recs, groups) if _slow.JOINT_GAIN and row_filters[i] is None else None
+        gsegs = gain_segments(recs, groups) if _filter_gain.JOINT_GAIN and row_filters[i] is None else None
         gains.append(None if gsegs is None
                      else (gsegs, matched_targets(recs, groups, i, targets, masses, topology, xs.shape[1])))
         sols = jax.device_get(_fit_wells(xs, vs, ys, w, library, solver, select, keep, noise, x_noise, band))

@@ -1,0 +1,186 @@
+"""The differentiation filter's gain and the noise it shares with the regression columns.
+
+A Savitzky-Golay estimate of x'' (or of a from v) is G[x''], G = H(w) / (i w)^k of its taps: not 1 on the
+harmonics of a nonlinear response. The local regressions (`_slow.band_rows`) pass their library columns and
+the target's measured inputs through the same G, so the equation holds again (`filter_gain`); on steady
+sines the joint regression's columns do too (`gain_segments`, `apply_gain`, `matched_targets`). Where x was
+measured and the accelerations estimated from it, the filtered columns carry the noise of x that the target
+carries, differentiated: `cross_moment` gives its expected product with the target's noise, which the local
+fits take off their normal equations (`_fit/_errors_in_variables.shifted_qr`).
+
+The module's switches (`MATCHED`, `RAW_LINEAR`, `JOINT_GAIN`, `CROSS`) give the earlier behaviours back, each
+with the measurement that decided it.
+"""
+
+import numpy as np
+
+#: the rows of a local fit on estimated accelerations pass through the differentiation filter's own
+#: gain (`filter_gain`, `band_rows`; False: the raw columns, as before)
+MATCHED = True
+#: ... the local stiffness's column q too (True: q raw, as at stop 40). G[q] carries the noise of x at every lag
+#: of the filter, correlated with the target's, which `cross_moment` takes off (`CROSS`): shallow arch, x only,
+#: 30 dB, `structured_noise`, local F' 24.80 and 14.91 through G without it for the truth's 24.32 and 14.44
+#: (12-15 standard errors), 24.31 and 14.43 with it. Raw, q misses the filter's shortfall at the well's
+#: frequency: single-tone arch, x only, 30 dB, seed 0, 2.68 % raw, 1.16 % through G; joint 10 Hz sine
+#: records, x only, 60 dB, seeds 0-3: 0.09/0.58/0.03/0.57 % raw, 0.018/0.017/0.14/0.009 % through G
+RAW_LINEAR = False
+
+
+#: the joint regression's columns through the gain as well where the accelerations were estimated from x
+#: (`gain_segments`; False: raw columns, as before). Not from v: single-tone arch, v only, 30 dB, seed 1,
+#: 2.25 % on raw columns, 17.2 % through G (seed 0 and 50 dB within 0.05 points)
+JOINT_GAIN = True
+
+
+def filter_gain(sig: np.ndarray, taps: np.ndarray, order: int, dt: float) -> np.ndarray:
+    """`sig` (N,) or (N, p) through the gain G(w) = H(w) / (i w)^order of the Savitzky-Golay taps of
+    a derivative of `order` (H their frequency response; G(0) = 1): what the differentiation did to the
+    derivative it estimated. On the mirror-extended record (no edge jump), by FFT, along axis 0."""
+    sig = np.asarray(sig, float)
+    n = sig.shape[0]
+    ext = np.concatenate([sig, sig[::-1]], axis=0)
+    w = 2.0 * np.pi * np.fft.rfftfreq(2 * n, dt)
+    half = taps.size // 2
+    lag = np.arange(-half, half + 1) * dt
+    if order == 2:
+        h = np.cos(np.outer(w, lag)) @ taps
+        gain = np.divide(h, -(w**2), out=np.ones_like(w), where=w > 0)
+    else:
+        h = np.sin(np.outer(w, lag)) @ taps
+        gain = np.divide(h, w, out=np.ones_like(w), where=w > 0)
+    spec = np.fft.rfft(ext, axis=0) * (gain if sig.ndim == 1 else gain[:, None])
+    return np.fft.irfft(spec, n=2 * n, axis=0)[:n]
+
+
+#: the local fits' normal equations lose the expected product of the columns' noise with the target's where
+#: both hold the noise of a measured x (accelerations estimated from it: `cross_moment`; False: as before)
+CROSS = True
+
+
+def impulse_response(taps: np.ndarray, order: int, dt: float) -> np.ndarray:
+    """The taps g (odd length, as `taps`) of `filter_gain`'s filter: G[c](t) = sum_l g(l) c(t + l), l from
+    -half to half. G = H / (i w)^k is the kernel h integrated k times, g(l) = dt^2 / 2 sum_m h(m) |l - m| for
+    k = 2 and dt / 2 sum_m h(m) sgn(l - m) for k = 1 (the Green's functions of d^k/dt^k); the low moments of
+    the Savitzky-Golay taps vanish, so g is zero outside their window."""
+    half = taps.size // 2
+    lag = np.arange(-half, half + 1)
+    d = lag[:, None] - lag[None, :]
+    green = 0.5 * dt**2 * np.abs(d) if order == 2 else -0.5 * dt * np.sign(d)
+    return green @ np.asarray(taps, float)
+
+
+def _correlate(a: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """sum_l kernel(l) a(t + l) along axis 0 (kernel centred, odd length; zeros beyond the ends)."""
+    from scipy.signal import fftconvolve
+
+    return fftconvolve(a, kernel[::-1].reshape((-1,) + (1,) * (a.ndim - 1)), mode="same", axes=0)
+
+
+def cross_moment(rec, i: int, q: np.ndarray, weights: np.ndarray, library, through: np.ndarray,
+                 resp: float) -> np.ndarray | None:
+    """(terms,): sum over the samples of `weights` times the expected product of each library column's noise
+    with the target's, to first order in the noise of x, where the record's accelerations were estimated from a
+    measured x (None elsewhere). The target holds resp h * (x + n) (h the second-derivative taps); a column
+    phi(q, v) (through G where `through`) moves by G[d phi / dq n + d phi / dv h1 * n] where v was estimated
+    from x too (h1 its first-derivative taps), so E[dc(t) dy(t)] = resp s^2 (sum_l g(l) h(l) dphi/dq(t + l)
+    + sum_l g(l) c1(l) dphi/dv(t + l)), c1(l) = sum_s h1(s) h(l + s), g = delta for a raw column. Raw q with
+    the centre tap in (steady sines): s^2 h(0); through G the spread of G carries it at every lag."""
+    import jax
+    import jax.numpy as jnp
+
+    from .._recordings._derivatives import savgol_taps
+    from ._noise import channel_variance
+
+    how = (rec.derivation or {}).get("a")
+    tg = _taps(rec)
+    if not CROSS or tg is None or how["from"] != "x" or "x" in rec.derived or tg[1] != 2:
+        return None
+    h, dt = tg[0], rec.dt
+    half = h.size // 2
+    s2 = channel_variance(rec.x[:, i], dt)
+    v = jnp.asarray(rec.v[:, i])
+    qj = jnp.asarray(q)
+    dq = np.asarray(jax.jvp(lambda z: library(z, v), (qj,), (jnp.ones_like(qj),))[1], float)
+    g = impulse_response(h, 2, dt)
+    kq = np.where(through[None, :], (g * h)[:, None], 0.0)
+    kq[half] = np.where(through, g[half] * h[half], h[half])
+    out = np.sum(weights[:, None] * np.stack([_correlate(dq[:, k], kq[:, k]) for k in range(dq.shape[1])], 1), 0)
+    if "v" in rec.derived:
+        h1 = savgol_taps(how["windows"][i], how["polyorder"], 1, dt)
+        dv = np.asarray(jax.jvp(lambda z: library(qj, z), (v,), (jnp.ones_like(v),))[1], float)
+        c1 = np.array([np.dot(h1[max(0, -l):h1.size - max(0, l)], h[max(0, l):h.size - max(0, -l)])
+                       for l in range(-half, half + 1)])
+        kv = g * c1  # raw columns: c1(0) = 0 (h1 odd, h even)
+        out = out + np.sum(weights[:, None] * np.stack(
+            [_correlate(dv[:, k], kv) if through[k] else np.zeros_like(dv[:, k]) for k in range(dv.shape[1])], 1), 0)
+    return resp * s2 * out
+
+
+def _taps(rec):
+    """(taps, order) of the recording's estimated accelerations where every DOF went through one
+    Savitzky-Golay window (the target then holds one filter), else None."""
+    from .._recordings._derivatives import savgol_taps
+
+    how = (rec.derivation or {}).get("a")
+    if not MATCHED or how is None or how.get("order") not in (1, 2):
+        return None
+    windows = {w for w in how["windows"] if w}
+    if len(windows) != 1:
+        return None
+    return savgol_taps(windows.pop(), how["polyorder"], how["order"], rec.dt, how["exclude_center"]), how["order"]
+
+
+def gain_segments(recs, groups) -> list[list[tuple]] | None:
+    """Per well, its records' (start, stop, dt, taps, order) within the well's concatenated rows
+    where the record's accelerations were estimated through one Savitzky-Golay window (`_taps`), None
+    in the list where not; None where no record of any well was: the joint regression's columns
+    pass through that gain (`_coordination/_joint.joint_coordinate`'s `gain`, `apply_gain`)."""
+    out, any_gain = [], False
+    for grp in groups:
+        start, segs = 0, []
+        for k in grp:
+            n, tg = recs[k].n_samples, _taps(recs[k])
+            tg = tg if tg is not None and tg[1] == 2 else None  # from x (module's JOINT_GAIN)
+            segs.append(None if tg is None else (start, start + n, float(recs[k].dt), tg[0], tg[1]))
+            any_gain |= tg is not None
+            start += n
+        out.append(segs)
+    return out if any_gain else None
+
+
+def apply_gain(segs, a: np.ndarray) -> np.ndarray:
+    """`a` (samples, ...) of one well with each record's rows through its filter's gain (`filter_gain`;
+    `segs` one well's list from `gain_segments`), padding and records without one left as they are."""
+    out = np.array(a, float)
+    for seg in segs:
+        if seg is not None:
+            start, stop, dt, taps, order = seg
+            out[start:stop] = filter_gain(out[start:stop], taps, order, dt)
+    return out
+
+
+def _inputs(rec, i: int, masses, topology) -> np.ndarray:
+    """The measured inputs (base acceleration, forces) in DOF `i`'s target (N,)."""
+    b, f = rec.inputs()
+    return np.asarray(topology.carried(f - masses[None, :] * topology.absolute(np.zeros_like(rec.x), b)))[:, i]
+
+
+def matched_targets(recs, groups, i: int, targets, masses, topology, width: int) -> np.ndarray:
+    """(wells, `width`) DOF `i`'s targets padded like the rows, the measured inputs of each record
+    with estimated accelerations through its filter's gain (the target then holds G[x''] and G[u]:
+    `band_rows`, and the joint regression with `gain_segments`)."""
+    from .._topology import as_topology
+
+    topo, masses = as_topology(topology), np.asarray(masses, float)
+    out = np.zeros((len(groups), width))
+    for g, grp in enumerate(groups):
+        start = 0
+        for k in grp:
+            r, tg = recs[k], _taps(recs[k])
+            yk = np.asarray(targets[k][:, i], float)
+            if tg is not None:
+                u = _inputs(r, i, masses, topo)
+                yk = yk + filter_gain(u, tg[0], tg[1], r.dt) - u
+            out[g, start:start + r.n_samples] = yk
+            start += r.n_samples
+    return out
