@@ -131,7 +131,7 @@ def test_cross_moment_is_the_noise_the_columns_share_with_the_target(exclude_cen
         for _ in range(400):
             rec, th, y = rows(truth + sd * rng.standard_normal(n), through)
             draws.append(np.sum(w[:, None] * (th - th0) * (y - y0)[:, None], axis=0))
-            predicted.append(cross_moment(rec, 0, rec.x[:, 0] - 0.3, w, lib, through, -1.0))
+            predicted.append(cross_moment(rec, 0, rec.x[:, 0] - 0.3, w, lib, through, -1.0, _taps(rec)[0]))
         mc, pred = np.mean(draws, axis=0), np.mean(predicted, axis=0)
         err = np.std(draws, axis=0) / np.sqrt(len(draws))
         for k in cols:

@@ -363,7 +363,7 @@ def joint_coordinate(
     (the mean kept), where the integrated x misses its slow part (`_slow.band_rows`).
     `gain`: where the accelerations were estimated, per well its records' filter gains
     (`_reconstruct/_filter_gain.gain_segments`): every column passes through its record's gain G, as the
-    target holds G[x''] (`ys` then holds the inputs through G too, `_filter_gain.matched_targets`).
+    target holds G[x''] (`ys` then holds the inputs through G too, `_filter_gain.matched_target`).
     """
     xs, vs, ys, weights = (np.asarray(a, float) for a in (xs, vs, ys, weights))
     raw = (xs, vs, ys, weights, x_noise)

@@ -77,14 +77,15 @@ def _correlate(a: np.ndarray, kernel: np.ndarray) -> np.ndarray:
 
 
 def cross_moment(rec, i: int, q: np.ndarray, weights: np.ndarray, library, through: np.ndarray,
-                 resp: float) -> np.ndarray | None:
+                 resp: float, h: np.ndarray) -> np.ndarray | None:
     """(terms,): sum over the samples of `weights` times the expected product of each library column's noise
     with the target's, to first order in the noise of x, where the record's accelerations were estimated from a
     measured x (None elsewhere). The target holds resp h * (x + n) (h the second-derivative taps); a column
     phi(q, v) (through G where `through`) moves by G[d phi / dq n + d phi / dv h1 * n] where v was estimated
     from x too (h1 its first-derivative taps), so E[dc(t) dy(t)] = resp s^2 (sum_l g(l) h(l) dphi/dq(t + l)
     + sum_l g(l) c1(l) dphi/dv(t + l)), c1(l) = sum_s h1(s) h(l + s), g = delta for a raw column. Raw q with
-    the centre tap in (steady sines): s^2 h(0); through G the spread of G carries it at every lag."""
+    the centre tap in (steady sines): s^2 h(0); through G the spread of G carries it at every lag. `h`: the
+    record's second-derivative taps (`_taps`)."""
     import jax
     import jax.numpy as jnp
 
@@ -92,10 +93,9 @@ def cross_moment(rec, i: int, q: np.ndarray, weights: np.ndarray, library, throu
     from ._noise import channel_variance
 
     how = (rec.derivation or {}).get("a")
-    tg = _taps(rec)
-    if not CROSS or tg is None or how["from"] != "x" or "x" in rec.derived or tg[1] != 2:
+    if not CROSS or how is None or how["from"] != "x" or "x" in rec.derived:
         return None
-    h, dt = tg[0], rec.dt
+    dt = rec.dt
     half = h.size // 2
     s2 = channel_variance(rec.x[:, i], dt)
     v = jnp.asarray(rec.v[:, i])
@@ -165,22 +165,15 @@ def _inputs(rec, i: int, masses, topology) -> np.ndarray:
     return np.asarray(topology.carried(f - masses[None, :] * topology.absolute(np.zeros_like(rec.x), b)))[:, i]
 
 
-def matched_targets(recs, groups, i: int, targets, masses, topology, width: int) -> np.ndarray:
-    """(wells, `width`) DOF `i`'s targets padded like the rows, the measured inputs of each record
-    with estimated accelerations through its filter's gain (the target then holds G[x''] and G[u]:
-    `band_rows`, and the joint regression with `gain_segments`)."""
+def matched_target(rec, y: np.ndarray, i: int, masses, topology, tg=None) -> np.ndarray:
+    """DOF `i`'s target `y` (N,) of one record with its measured inputs through the filter's gain where the
+    record's accelerations were estimated (`tg`: its `_taps`, computed where not given): the target then
+    holds G[x''] and G[u] (`band_rows`, and the joint regression with `gain_segments`)."""
     from .._topology import as_topology
 
-    topo, masses = as_topology(topology), np.asarray(masses, float)
-    out = np.zeros((len(groups), width))
-    for g, grp in enumerate(groups):
-        start = 0
-        for k in grp:
-            r, tg = recs[k], _taps(recs[k])
-            yk = np.asarray(targets[k][:, i], float)
-            if tg is not None:
-                u = _inputs(r, i, masses, topo)
-                yk = yk + filter_gain(u, tg[0], tg[1], r.dt) - u
-            out[g, start:start + r.n_samples] = yk
-            start += r.n_samples
-    return out
+    y = np.asarray(y, float)
+    tg = _taps(rec) if tg is None else tg
+    if tg is None:
+        return y
+    u = _inputs(rec, i, np.asarray(masses, float), as_topology(topology))
+    return y + filter_gain(u, tg[0], tg[1], rec.dt) - u

@@ -30,7 +30,7 @@ from ._degree import (averaged_parts, confine_borrowed, degree, least_risk_degre
                       redundancy)
 from ._sanity import GMRDataWarning
 from . import _filter_gain
-from ._filter_gain import apply_gain, gain_segments, matched_targets
+from ._filter_gain import apply_gain, gain_segments, matched_target
 from ._slow import band_rows, edge_weights, restore_slow, segments
 from ._truncation import with_truncation
 
@@ -588,7 +588,7 @@ def _joint(fits: LocalFit, xs, vs, ys, w, speed: float, restoring: Solution | No
     slow bands where x was integrated (`_slow.segments`), taken out of the rows. `gain`: where the
     accelerations were estimated, `(segments, ys)`: per well its records' filter gains
     (`_filter_gain.gain_segments`, from x only), through which the columns pass, and the targets with their inputs through
-    them (`_filter_gain.matched_targets`), which replace `ys`."""
+    them (`_filter_gain.matched_target`), which replace `ys`."""
     eq = np.asarray(fits.equilibrium)
     gain_segs = None
     if gain is not None:
@@ -1076,7 +1076,8 @@ def reconstruct(
         row_filters.append(None if measured else _derived_rows(recs, groups, i))
         gsegs = gain_segments(recs, groups) if _filter_gain.JOINT_GAIN and row_filters[i] is None else None
         gains.append(None if gsegs is None
-                     else (gsegs, matched_targets(recs, groups, i, targets, masses, topology, xs.shape[1])))
+                     else (gsegs, _pad_stack([[matched_target(recs[k], targets[k][:, i], i, masses, topology)
+                                               for k in g] for g in groups])[0]))
         sols = jax.device_get(_fit_wells(xs, vs, ys, w, library, solver, select, keep, noise, x_noise, band))
         fits: LocalFit = sols.value
         eiv = _eiv_report(x_noise, xs, w, sols.stats.get("eiv_applied"))

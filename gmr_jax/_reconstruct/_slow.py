@@ -36,7 +36,7 @@ import numpy as np
 from .._recordings._integrate import remove_drift
 from .._recordings._recording import Recording
 from . import _filter_gain
-from ._filter_gain import _inputs, _taps, cross_moment, filter_gain
+from ._filter_gain import _taps, cross_moment, filter_gain, matched_target
 
 #: the curvature enters the restored shift only where the band-limited fit resolves it
 MIN_T = 3.0
@@ -213,13 +213,13 @@ def band_rows(recs, groups, i: int, w: np.ndarray, targets, library, masses, top
             yk = np.asarray(targets[k][:, i], float)
             if gains[g][m] is not None:  # the columns through the target's filter, the inputs too
                 taps, order = gains[g][m]
-                u = _inputs(r, i, masses, topo)
                 raw = th
                 th = filter_gain(th, taps, order, r.dt)
                 if _filter_gain.RAW_LINEAR:
                     th[:, k1] = raw[:, k1]
-                yk = yk + filter_gain(u, taps, order, r.dt) - u
-                c = cross_moment(r, i, r.x[:, i] - centre, wg[start:start + r.n_samples], library, through, resp)
+                yk = matched_target(r, yk, i, masses, topo, gains[g][m])
+                c = None if order != 2 else cross_moment(r, i, r.x[:, i] - centre, wg[start:start + r.n_samples],
+                                                         library, through, resp, taps)
                 cross = cross if c is None else cross + c
             if segs is not None:
                 _, _, dt, cut = segs[g][m]
