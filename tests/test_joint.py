@@ -155,6 +155,10 @@ def test_default_replaces_an_untested_outward_turn():
     ts, x, v, exc = st.cross_record()
 
     b, c, mass = np.asarray(m.velocity_damping[0]), np.asarray(m.position_damping[0]), float(m.masses[0])
+    # the air drag the joint regression's score favours (v|v| by 5.7 over none) is kept: the tie among
+    # near-equal laws picks the tamest of as many velocity terms, it does not drop one (measured 0.0571 for
+    # the truth's 0.05; dropped, the one-period NRMSE of the cross-well record was 16.1 % for 5.2 %)
+    assert s["joint_velocity_orders"] == [2] and abs(b[2] - st.SYSTEM.truth.c2) < 0.3 * st.SYSTEM.truth.c2
     w = 2 * np.pi * st.CROSS["frequency"]
 
     def rhs(t, y):  # m x'' + F(x) + sum_j B_j sgn(v)|v|^j + C(x) v = -m a_base, in NumPy

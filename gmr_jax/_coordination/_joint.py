@@ -79,9 +79,10 @@ class JointSettings(eqx.Module):
       trace(G) / trace(penalty) of each block.
     - `damping_only`: fit the damping alone (y already has the restoring force removed).
     - `tie`: admissible candidates whose score is within `tie` of the best are taken as equally
-      supported by the data, and the one that extrapolates most tamely wins: the lowest highest
-      velocity power (v|v| before v^3: single-tone records at |v| <= 0.2 cannot tell them apart,
-      and v^3 damps 5 x too hard at 3), then the lowest degrees K and J. 0: the best score.
+      supported by the data, and among those with as many velocity terms as the best the one that
+      extrapolates most tamely wins: the lowest highest velocity power (v|v| before v^3: single-tone
+      records at |v| <= 0.2 cannot tell them apart, and v^3 damps 5 x too hard at 3), then the lowest
+      degrees K and J. 0: the best score.
     """
 
     max_degree: int = eqx.field(static=True, default=13)
@@ -433,6 +434,10 @@ def joint_coordinate(
                                 band=band, gain=gain)
     if settings.tie > 0 and admissible.any():
         near = np.nonzero(score <= score[best] + settings.tie)[0]
+        # as many velocity terms as the best: the tie picks among laws of the damping the data chose, it does not
+        # drop a term they favour (single-tone arch, x only, 50 dB, seed 0: v|v| by 5.7 over none; dropped, the
+        # one-period NRMSE of the unseen cross-well record was 16.1 %, kept 5.2 %)
+        near = np.array([i for i in near if len(meta[i][2]) == len(meta[best][2])])
         best = int(min(near, key=lambda i: (max(meta[i][2], default=1), meta[i][0], meta[i][1], score[i])))
     k, j, vel = meta[best]
     sigma2 = float(rss[best]) / max(n - float(edf[best]), 1.0)  # the recorded samples' residual
