@@ -433,6 +433,46 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
 
 
 
+#: `_one_of_a_group` runs (a module switch, for the studies' before/after and the tests' teeth)
+ONE_OF_A_GROUP = True
+
+
+def _one_of_a_group(fits, screened, xs, vs, ys, w, library, solver, n_sigma, dof, failure, noise=None, x_noise=None,
+                    band=None):
+    """A well whose damping terms the t-screen zeroed all at once, though its fit had some: collinear terms (on a
+    single tone every power of v is the fundamental's stand-in) share the dissipation, none alone at `n_sigma`.
+    The screen zeroes them without a refit, so the well has no damping and keeps the other coefficients as fitted
+    beside them. Each of those terms alone is refitted (the well's other kept terms, exempt from the threshold) and
+    the one that leaves the least residual is kept where the refit resolves it; where none does, the screened well
+    as it was."""
+    damping = np.array([phys != STIFFNESS for phys, _ in library.terms()])
+    before, after = np.asarray(fits.coef), np.asarray(screened.coef)
+    noise, x_noise = noise or [None] * xs.shape[0], x_noise or [None] * xs.shape[0]
+    band = band or [None] * xs.shape[0]
+    for k in range(before.shape[0]):
+        had = np.nonzero(damping & (before[k] != 0))[0]
+        if had.size == 0 or np.any(damping & (after[k] != 0)):
+            continue
+        best = None
+        for j in had:
+            mask = with_constant(after[k] != 0, library)
+            mask[j] = True
+            slv = eqx.tree_at(lambda s: s.threshold, solver, fits.threshold[k])
+            sol = jax.device_get(fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=mask,
+                                           support=mask, noise=noise[k], x_noise=x_noise[k], band=band[k],
+                                           throw=False))
+            if int(sol.result._value) != int(RESULTS.successful._value):
+                failure.note(sol.result, f"DOF {dof}, well {k}: refit with one of its damping terms")
+                continue
+            c, var = float(sol.value.coef[j]), float(sol.value.covariance[j, j])
+            if var > 0 and abs(c) >= n_sigma * np.sqrt(var) and (best is None or float(sol.value.rss) < best[0]):
+                best = (float(sol.value.rss), sol.value)
+        if best is not None:
+            screened = _set_well(screened, k, _screen(jax.tree.map(lambda a: np.asarray(a)[None], best[1]), n_sigma,
+                                                      library))
+    return screened
+
+
 def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failure, noise=None, x_noise=None,
                       upto: int | None = None, band=None):
     """Raise each well's local restoring order while the next Taylor term is significant.
@@ -1111,7 +1151,11 @@ def reconstruct(
         fits: LocalFit = sols.value
         eiv = _eiv_report(x_noise, xs, w, sols.stats.get("eiv_applied"))
         if screen_sigma is not None:
-            fits = _screen(fits, screen_sigma, library)
+            screened = _screen(fits, screen_sigma, library)
+            if ONE_OF_A_GROUP:
+                screened = _one_of_a_group(fits, screened, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
+                                           noise, x_noise, band)
+            fits = screened
         codes = np.asarray(sols.result._value)
         for k in np.nonzero(codes != RESULTS.successful._value)[0]:
             failure.note(codes[k], f"DOF {i}, well {k}: local fit")
