@@ -129,9 +129,14 @@ def test_damping_terms_found_at_one_well_only_are_dropped():
     default = g.reconstruct(recs, g.Library(5, 5), shared_damping=False)
     assert damping_error(default.value, system.truth, 0, *box) < 0.01
     res = g.reconstruct(recs, g.Library(5, 5), extend_restoring=False, shared_design=False)
-    assert res.stats["dofs"][0].stats["dropped_velocity_damping"] == [2, 3, 4]
+    # the candidate sets' terms are exempt from the threshold since stop 42 (`_share_velocity_damping`): v|v|
+    # is resolved at both wells then and stays, small (-0.0129 beside 0.358 v: dissipative up to |v| = 28,
+    # 277 x the box's speeds); v^3 and v^3|v| are dropped (before: all three, 0.19 % damping error; now 0.13 %)
+    assert set(res.stats["dofs"][0].stats["dropped_velocity_damping"]) >= {3, 4}
     assert damping_error(res.value, system.truth, 0, *box) < 0.005
-    assert np.all(res.value.velocity_damping[:, 2:] == 0)
+    assert np.all(res.value.velocity_damping[:, 3:] == 0)
+    b = np.asarray(res.value.velocity_damping[0])
+    assert abs(b[2]) * 10 * box[1][1] < 0.1 * b[1]  # v|v| moves the damping < 10 % up to 10 x the box's speeds
     for i in range(1, 5):  # cells where every well agrees are untouched
         assert res.stats["dofs"][i].stats["dropped_velocity_damping"] == []
         np.testing.assert_array_equal(res.stats["dofs"][i].local_coef, raw.stats["dofs"][i].local_coef)
