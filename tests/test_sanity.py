@@ -436,3 +436,23 @@ def test_a_screen_that_zeroes_every_damping_term_keeps_one(joint, monkeypatch):
         m.setattr(R, "ONE_OF_A_GROUP", False)
         slope, cubic, err = outcome()
         assert np.any(slope / true_slope < 0.98) and err > 0.01  # measured 4373 at one well, 1.78 %
+
+
+def test_14_damping_law_the_records_do_not_decide():
+    """Rule 14: linear damping chosen (0.188 v) and, scored 8 worse, 0.05 v|v| beside it (the single-tone arch's
+    truth is 0.18 v + 0.05 v|v|): the two part by 25 % at 0.05 v^2 = 0.25 x 0.188 v, |v| = 0.94, below the speed
+    bound 3 and beyond twice the recorded 0.2: warned, with that speed. A score 12 worse decides it; a bound within
+    twice the recorded speeds, or laws that never part by 25 % below it, are silent."""
+    b, alt_b = [0.0, 0.188, 0.0, 0.0], [0.0, 0.0, 0.05, 0.0]
+    c, alt_c = [0.0], [0.0]
+    msgs = _sanity.check_damping_choice(0, b, c, alt_b, alt_c, [2], 8.0, 0.2, 3.0, -1.0, 1.0)
+    assert len(msgs) == 1 and "v|v|" in msgs[0] and "do not decide the damping law" in msgs[0]
+    part = float(msgs[0].split("above |v| = ")[1].split(" ")[0])
+    assert abs(part - 0.94) < 0.02, part
+    assert _sanity.check_damping_choice(0, b, c, alt_b, alt_c, [2], 12.0, 0.2, 3.0, -1.0, 1.0) == []
+    assert _sanity.check_damping_choice(0, b, c, alt_b, alt_c, [2], 8.0, 0.2, 0.39, -1.0, 1.0) == []
+    assert _sanity.check_damping_choice(0, b, c, alt_b, alt_c, [2], 8.0, 0.2, 0.9, -1.0, 1.0) == []
+    assert _sanity.check_damping_choice(0, b, c, alt_b, alt_c, None, 8.0, 0.2, 3.0, -1.0, 1.0) == []
+    # a position-dependent difference counts too: 0.1 x^2 v beside 0.188 v parts by 25 % where x^2 > 0.47
+    msgs = _sanity.check_damping_choice(0, b, c, [0.0] * 4, [0.0, 0.0, 0.1], [0], 3.0, 0.2, 3.0, -1.0, 1.0)
+    assert len(msgs) == 1 and "sgn(v)" in msgs[0]

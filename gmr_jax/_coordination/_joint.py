@@ -352,7 +352,10 @@ def joint_coordinate(
     flat layout, zeros when there is none: the degree choice's discrepancy that `reconstruct`
     adds to the covariance; `joint_conflict`: the best admissible score minus the best of all,
     and `joint_unconstrained`: the best candidate of all minus the chosen one, zeros unless the
-    conflict exceeds `CONFLICT`). `refine`: on a conflict, search once more on the penalty grid
+    conflict exceeds `CONFLICT`; `joint_damping_alternative_orders`, `_delta`, `_velocity`, `_position`: the best
+    admissible candidate of the chosen degree with another set of velocity terms, its score less the chosen one's
+    and its damping coefficients less the chosen ones, None / inf / zeros when there is none: rule 14 of
+    `reconstruct`'s checks). `refine`: on a conflict, search once more on the penalty grid
     refined to half decades (module docstring). `x_noise`: per well, the variance of white noise
     on the measured x; the normal equations are then corrected for it (errors in variables, the
     corrected score of `_fit/_errors_in_variables.py`, each power of u replaced by its Hermite
@@ -468,6 +471,12 @@ def joint_coordinate(
         alternative = np.sqrt(weight) * (lin @ theta[alt] - lin @ theta[best])
     else:
         alternative = np.zeros(g_size)
+    # the damping the data could not tell from the chosen one (rule 14, `_sanity.check_damping_choice`): the best
+    # admissible candidate of the same restoring degree with another set of velocity terms, as a difference
+    vels = [mt[2] for mt in meta]
+    pool_d = admissible & (degrees == k) & np.array([v != vel for v in vels]) & np.isfinite(bic)
+    alt_d = int(np.argmin(np.where(pool_d, bic, np.inf))) if pool_d.any() else None
+    damping_alt = (np.zeros(g_size) if alt_d is None else lin @ theta[alt_d] - lin @ theta[best])
     # ... and the law the data prefer, as a difference to the chosen one (`reconstruct` widens the band by it
     # and warns where the conflict is decisive, `CONFLICT`)
     unconstrained = lin @ theta[free] - lin @ theta[best] if conflict > CONFLICT else np.zeros(g_size)
@@ -479,7 +488,11 @@ def joint_coordinate(
              "joint_n_candidates": int(admissible.size),
              "joint_alternative": alternative.tolist(), "joint_alternative_degree": -1 if alt is None else meta[alt][0],
              "joint_conflict": conflict, "joint_unconstrained": unconstrained.tolist(),
-             "joint_unconstrained_degree": meta[free][0]}
+             "joint_unconstrained_degree": meta[free][0],
+             "joint_damping_alternative_orders": None if alt_d is None else list(meta[alt_d][2]),
+             "joint_damping_alternative_delta": np.inf if alt_d is None else float(bic[alt_d] - bic[best]),
+             "joint_damping_alternative_velocity": damping_alt[off_v:off_p].tolist(),
+             "joint_damping_alternative_position": damping_alt[off_p:].tolist()}
     return (flat[: layout.k + 1], flat[off_v:off_p], flat[off_p:], cov, stats)
 
 

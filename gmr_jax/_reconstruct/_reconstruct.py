@@ -1227,6 +1227,14 @@ def reconstruct(
             warnings += _sanity.check_conflict(i, np.asarray(g.stiffness), np.asarray(coord.aux)[:n_k, :n_k],
                                                coord.stats["joint_unconstrained"], float(coord.stats["joint_conflict"]),
                                                float(xall.min()), float(xall.max()))
+        if coord.stats.get("joint_damping_alternative_orders") is not None:  # rule 14
+            mass_i = float(masses[i])
+            warnings += _sanity.check_damping_choice(
+                i, np.asarray(g.velocity_damping), np.asarray(g.position_damping),
+                coord.stats["joint_damping_alternative_velocity"], coord.stats["joint_damping_alternative_position"],
+                coord.stats["joint_damping_alternative_orders"], float(coord.stats["joint_damping_alternative_delta"]),
+                float(np.max(np.abs(np.asarray(vs)) * (np.asarray(w) > 0))), _speed(fits, vs, w, mass_i, library),
+                float(xall.min()), float(xall.max()))
         # a DOF that borrowed was coordinated with odd degrees only: its discrepancy is that degree choice's
         g, cov_i = _calibrated(coord, fits, library, route, paper_sound, confining or any(borrowed))
         se = GlobalCoefficients(*(np.pad(np.asarray(a), (0, np.asarray(b).shape[0] - np.asarray(a).shape[0]))
