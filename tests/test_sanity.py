@@ -358,60 +358,15 @@ def test_estimated_accelerations_are_judged_in_the_response_band():
     assert not _has(msgs, "poorly")
 
 
-@pytest.mark.slow  # two reconstructions of 10 Hz sine records (~40 s)
-def test_shared_damping_does_not_keep_a_viscous_stand_in(joint, monkeypatch):
-    """Displacement-only 10 Hz sines at 30 dB (`studies/joint_sine_records.py`, seed 1): the wells' first fits
-    keep different damping sets (v^4, v^5 at one, five terms at the other) and F' within 1 % of the truth's
-    4488. The viscous v, exempt from the threshold, stands in for the truth's 10 v^3 on the fundamental; where
-    the sets the wells share were each refitted beside it, its collinear partners fell to the t-screen, the
-    terms left unshared were dropped and both wells ended at v alone, F' 4374 (13) and the law 2.3 % off. Each
-    candidate set is now exempt from the threshold and scored on what it leaves once the wells agree: F' back
-    within 1 %, the law 0.22 % off."""
-    from gmr_jax._reconstruct import _reconstruct as R
-
+def _sine_outcome(joint, seed: int):
+    """Displacement-only records of the bistable joint's steady response to a 1 degree, 10 Hz base sine about
+    each well at 30 dB (`studies/joint_sine_records.py`, noise seed `seed`), and a function that reconstructs
+    them with the defaults (the module's switches as the caller set them): per well the local slope F' and v^3
+    coefficient, and the restoring error against the truth's cubic over 1.5 x the wells' span (NumPy)."""
     ts = jnp.arange(int(DURATION * 1000) + 1) / 1000.0
     inp = g.BaseSine(np.deg2rad(1.0), 10.0)
     base = np.asarray(jax.vmap(lambda t: inp(t)[0])(ts))
-    rng = np.random.default_rng(1)
-    recs = [g.Recording(t=np.asarray(ts), x=g.add_noise(np.asarray(g.simulate(joint.truth, inp, ts, xe).value[0]),
-                                                          30.0, rng), base_acc=base, masses=np.ones(1),
-                        name=f"sine_S{i + 1}") for i, xe in enumerate(joint.equilibria)]
-    x = np.linspace(-1.5, 1.5, 301) * joint.equilibria.max()
-    truth = np.polynomial.polynomial.polyval(x, [0.0, *g.systems.JOINT_STIFFNESS[:1], 0.0, g.systems.JOINT_STIFFNESS[1]])
-
-    def outcome():
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            sol = g.reconstruct(recs, throw=False)
-        rep = sol.stats["dofs"][0]
-        slope = np.asarray(rep.local_coef)[:, sol.stats["library"].names().index("x")]
-        model = np.polynomial.polynomial.polyval(x, np.asarray(sol.value.stiffness[0]))
-        return slope, np.linalg.norm(model - truth) / np.linalg.norm(truth)
-
-    slope, err = outcome()
-    true_slope = -2.0 * g.systems.JOINT_STIFFNESS[0]
-    assert np.all(np.abs(slope / true_slope - 1) < 0.01), slope
-    assert err < 0.005, err  # measured 0.22 %
-    with monkeypatch.context() as m:  # the rule before
-        for flag in ("SCORE_SHARED", "EXEMPT_TRIED"):
-            m.setattr(R, flag, False)
-        slope, err = outcome()
-        assert np.all(slope / true_slope < 0.98) and err > 0.02  # measured 4374/4373, 2.3 %
-
-
-@pytest.mark.slow  # two reconstructions of 10 Hz sine records (~40 s)
-def test_a_screen_that_zeroes_every_damping_term_keeps_one(joint, monkeypatch):
-    """The same records, seed 3: one well's fit shares the dissipation among collinear powers of v, none at 3
-    standard errors alone; the t-screen zeroed them all without a refit, the well had no damping, the other
-    well kept v (the stand-in of the truth's 10 v^3), F' 4373 (13) for 4488 and the law 1.78 % off. The term
-    of the group that leaves the least residual alone is kept where its refit resolves it: v^3 at both wells
-    (9.88 and 9.92), F' within 0.3 %, the law 0.17 % off."""
-    from gmr_jax._reconstruct import _reconstruct as R
-
-    ts = jnp.arange(int(DURATION * 1000) + 1) / 1000.0
-    inp = g.BaseSine(np.deg2rad(1.0), 10.0)
-    base = np.asarray(jax.vmap(lambda t: inp(t)[0])(ts))
-    rng = np.random.default_rng(3)
+    rng = np.random.default_rng(seed)
     recs = [g.Recording(t=np.asarray(ts), x=g.add_noise(np.asarray(g.simulate(joint.truth, inp, ts, xe).value[0]),
                                                           30.0, rng), base_acc=base, masses=np.ones(1),
                         name=f"sine_S{i + 1}") for i, xe in enumerate(joint.equilibria)]
@@ -425,8 +380,45 @@ def test_a_screen_that_zeroes_every_damping_term_keeps_one(joint, monkeypatch):
         names = sol.stats["library"].names()
         local = np.asarray(sol.stats["dofs"][0].local_coef)
         model = np.polynomial.polynomial.polyval(x, np.asarray(sol.value.stiffness[0]))
-        return local[:, names.index("x")], local[:, names.index("v^3")], np.linalg.norm(model - truth) / np.linalg.norm(truth)
+        return (local[:, names.index("x")], local[:, names.index("v^3")],
+                np.linalg.norm(model - truth) / np.linalg.norm(truth))
 
+    return outcome
+
+
+@pytest.mark.slow  # two reconstructions of 10 Hz sine records (~40 s)
+def test_shared_damping_does_not_keep_a_viscous_stand_in(joint, monkeypatch):
+    """Displacement-only 10 Hz sines at 30 dB (`studies/joint_sine_records.py`, seed 1): the wells' first fits
+    keep different damping sets (v^4, v^5 at one, five terms at the other) and F' within 1 % of the truth's
+    4488. The viscous v, exempt from the threshold, stands in for the truth's 10 v^3 on the fundamental; where
+    the sets the wells share were each refitted beside it, its collinear partners fell to the t-screen, the
+    terms left unshared were dropped and both wells ended at v alone, F' 4374 (13) and the law 2.3 % off. Each
+    candidate set is now exempt from the threshold and scored on what it leaves once the wells agree: F' back
+    within 1 %, the law 0.22 % off."""
+    from gmr_jax._reconstruct import _reconstruct as R
+
+    outcome = _sine_outcome(joint, 1)
+    slope, _, err = outcome()
+    true_slope = -2.0 * g.systems.JOINT_STIFFNESS[0]
+    assert np.all(np.abs(slope / true_slope - 1) < 0.01), slope
+    assert err < 0.005, err  # measured 0.22 %
+    with monkeypatch.context() as m:  # the rule before
+        for flag in ("SCORE_SHARED", "EXEMPT_TRIED"):
+            m.setattr(R, flag, False)
+        slope, _, err = outcome()
+        assert np.all(slope / true_slope < 0.98) and err > 0.02  # measured 4374/4373, 2.3 %
+
+
+@pytest.mark.slow  # two reconstructions of 10 Hz sine records (~40 s)
+def test_a_screen_that_zeroes_every_damping_term_keeps_one(joint, monkeypatch):
+    """The same records, seed 3: one well's fit shares the dissipation among collinear powers of v, none at 3
+    standard errors alone; the t-screen zeroed them all without a refit, the well had no damping, the other
+    well kept v (the stand-in of the truth's 10 v^3), F' 4373 (13) for 4488 and the law 1.78 % off. The term
+    of the group that leaves the least residual alone is kept where its refit resolves it: v^3 at both wells
+    (9.88 and 9.92), F' within 0.3 %, the law 0.17 % off."""
+    from gmr_jax._reconstruct import _reconstruct as R
+
+    outcome = _sine_outcome(joint, 3)
     slope, cubic, err = outcome()
     true_slope = -2.0 * g.systems.JOINT_STIFFNESS[0]
     assert np.all(np.abs(slope / true_slope - 1) < 0.01), slope

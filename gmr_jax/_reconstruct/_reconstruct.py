@@ -348,8 +348,8 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
     """One set of position-independent damping terms for every well (Eq. 21). Where the wells'
     fits selected different sets, each well is refitted (its own other terms, at its own threshold)
     with each candidate set: every well's own selection, their union, their intersection, none and
-    each term of the union alone; the candidate's terms are exempt
-    from the threshold (the t-screen judges them). Terms a refit leaves unshared are dropped and the wells
+    each term of the union alone; the candidate's terms are exempt from the threshold (the t-screen judges
+    them). Terms a refit leaves unshared are dropped and the wells
     that had them refitted, until every remaining term is shared; the candidate whose shared outcome has the
     least summed BIC over the wells wins (sum of n log(rss / n) + p log n). Returns the fits and the dropped
     orders j.
@@ -431,6 +431,12 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
     return fits, sorted(set(dropped))
 
 
+def _refit_on(xs, vs, ys, w, library, solver, fits, k: int, mask, noise, x_noise, band):
+    """Well `k` refitted on the support `mask` (at its own threshold, every term of `mask` exempt from it):
+    the `fit_local` Solution on the host. `noise`, `x_noise`, `band`: per-well lists, as `_fit_wells` takes."""
+    slv = eqx.tree_at(lambda s: s.threshold, solver, fits.threshold[k])
+    return jax.device_get(fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=mask, support=mask,
+                                    noise=noise[k], x_noise=x_noise[k], band=band[k], throw=False))
 
 
 #: `_one_of_a_group` runs (a module switch, for the studies' before/after and the tests' teeth)
@@ -457,10 +463,7 @@ def _one_of_a_group(fits, screened, xs, vs, ys, w, library, solver, n_sigma, dof
         for j in had:
             mask = with_constant(after[k] != 0, library)
             mask[j] = True
-            slv = eqx.tree_at(lambda s: s.threshold, solver, fits.threshold[k])
-            sol = jax.device_get(fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=mask,
-                                           support=mask, noise=noise[k], x_noise=x_noise[k], band=band[k],
-                                           throw=False))
+            sol = _refit_on(xs, vs, ys, w, library, solver, fits, k, mask, noise, x_noise, band)
             if int(sol.result._value) != int(RESULTS.successful._value):
                 failure.note(sol.result, f"DOF {dof}, well {k}: refit with one of its damping terms")
                 continue
@@ -497,10 +500,7 @@ def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failur
                 break
             mask = with_constant(coef != 0, library)
             mask[idx[top + 1]] = True
-            slv = eqx.tree_at(lambda s: s.threshold, solver, fits.threshold[k])
-            sol = jax.device_get(fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=mask,
-                                           support=mask, noise=noise[k], x_noise=x_noise[k], band=band[k],
-                                           throw=False))
+            sol = _refit_on(xs, vs, ys, w, library, solver, fits, k, mask, noise, x_noise, band)
             c = float(sol.value.coef[idx[top + 1]])
             se = float(np.sqrt(max(float(sol.value.covariance[idx[top + 1], idx[top + 1]]), 0.0)))
             if int(sol.result._value) != int(RESULTS.successful._value) or not abs(c) >= n_sigma * se:
@@ -513,13 +513,17 @@ def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failur
     return fits, added
 
 
+def _recorded_speed(vs, w) -> float:
+    """The largest recorded |v| of one DOF (padded per-well arrays, `w` 0 on padding)."""
+    return float(np.max(np.abs(np.asarray(vs)) * (np.asarray(w) > 0)))
+
+
 def _speed(fits: LocalFit, vs, w, mass: float, library: Library) -> float:
     """A generous bound on the speeds a model of this DOF will see: 3 x the recorded ones, or
     the interwell distance times the stiffest well's angular frequency."""
     eq = np.asarray(fits.equilibrium)
     k_max = float(np.max(np.abs(np.asarray(fits.coef)[:, library.column(STIFFNESS, 1)])))
-    v_max = float(np.max(np.abs(np.asarray(vs)) * (np.asarray(w) > 0)))
-    return max(3.0 * v_max, float(np.ptp(eq)) * np.sqrt(k_max / mass))
+    return max(3.0 * _recorded_speed(vs, w), float(np.ptp(eq)) * np.sqrt(k_max / mass))
 
 
 #: auto coordination: on a paper route whose restoring shape alone is inadmissible and untested by
@@ -1228,13 +1232,12 @@ def reconstruct(
                                                coord.stats["joint_unconstrained"], float(coord.stats["joint_conflict"]),
                                                float(xall.min()), float(xall.max()))
         if coord.stats.get("joint_damping_alternative_orders") is not None:  # rule 14
-            mass_i = float(masses[i])
             warnings += _sanity.check_damping_choice(
                 i, np.asarray(g.velocity_damping), np.asarray(g.position_damping),
                 coord.stats["joint_damping_alternative_velocity"], coord.stats["joint_damping_alternative_position"],
                 coord.stats["joint_damping_alternative_orders"], float(coord.stats["joint_damping_alternative_delta"]),
-                float(np.max(np.abs(np.asarray(vs)) * (np.asarray(w) > 0))), _speed(fits, vs, w, mass_i, library),
-                float(xall.min()), float(xall.max()))
+                _recorded_speed(vs, w), _speed(fits, vs, w, float(masses[i]), library), float(xall.min()),
+                float(xall.max()))
         # a DOF that borrowed was coordinated with odd degrees only: its discrepancy is that degree choice's
         g, cov_i = _calibrated(coord, fits, library, route, paper_sound, confining or any(borrowed))
         se = GlobalCoefficients(*(np.pad(np.asarray(a), (0, np.asarray(b).shape[0] - np.asarray(a).shape[0]))

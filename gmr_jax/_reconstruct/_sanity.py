@@ -628,7 +628,7 @@ def check_conflict(dof: int, stiffness, covariance, difference, conflict: float,
 #: Rule 14: the data cannot decide the damping law where another set of velocity terms scores within this of the
 #: chosen one (-2 log evidence; "very strong" evidence on Kass and Raftery's scale decides, as `_joint.CONFLICT`)
 DAMPING_UNDECIDED = 10.0
-#: ... and the two laws' damping forces differ by more than this share at the model's speed bound
+#: ... and the two laws' damping forces part by more than this share below the model's speed bound
 DAMPING_SPREAD = 0.25
 
 
@@ -640,8 +640,8 @@ def check_damping_choice(dof: int, velocity_damping, position_damping, alt_veloc
     them (`delta` < `DAMPING_UNDECIDED`) and the model is meant for speeds (`speed`, its bound) beyond twice the
     recorded ones (`recorded_speed`), warn if their damping forces part by more than `DAMPING_SPREAD` below
     `speed`, and say from which speed. Single-tone arch, x only, 50 dB, seed 1: records at |v| <= 0.21, linear
-    damping chosen, v|v| 8.9 worse; at |v| = 3 the truth damps 0.99, the model 0.56: the one-period NRMSE of a
-    cross-well record 16 %, 5 % with the truth's damping."""
+    damping chosen, v^3 8.9 worse (parting above |v| = 0.58); at |v| = 3 the truth damps 0.99, the model 0.56:
+    the one-period NRMSE of a cross-well record 16 %, 5 % with the truth's damping."""
     b, c = np.asarray(velocity_damping, float), np.asarray(position_damping, float)
     db, dc = np.asarray(alt_velocity, float), np.asarray(alt_position, float)
     if orders is None or not np.isfinite(delta) or delta >= DAMPING_UNDECIDED or not speed > 2.0 * recorded_speed:
