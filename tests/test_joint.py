@@ -115,7 +115,7 @@ def test_an_undetermined_exact_law_gives_way(single_tone, monkeypatch):
     far more than `UNDETERMINED` of it between the wells: the default says so and takes the joint
     regression (measured 1.12 %). With the screen that keeps one term of such a group (the default), that
     well's F''/2 is -23.76 (0.97) and the default law 1.14 % off."""
-    from gmr_jax._reconstruct import _reconstruct as R
+    from gmr_jax._reconstruct import _local_rules as R
     from gmr_jax._reconstruct._reconstruct import UNDETERMINED
 
     st, recs, _, _ = single_tone

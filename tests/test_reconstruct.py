@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import gmr_jax as g
-from gmr_jax._reconstruct._reconstruct import low_order_terms, velocity_terms_not_shared
+from gmr_jax._reconstruct._local_rules import low_order_terms, velocity_terms_not_shared
 from gmr_jax.metrics._metrics import damping_error, equilibria, restoring_error
 
 
@@ -145,7 +145,7 @@ def test_damping_terms_found_at_one_well_only_are_dropped():
 def test_screen_truncates_the_restoring_series_from_the_top_only():
     """An unresolved q^3 under a resolved q^4 is kept (the coordination would take a zero there as
     exact); an unresolved top order is dropped; a zero STLS chose stays a known zero."""
-    from gmr_jax._reconstruct._reconstruct import _screen
+    from gmr_jax._reconstruct._local_rules import _screen
 
     lib = g.Library(5, 1)  # 1, q .. q^5, sgn(v), v, q v
     se = np.array([1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0])
@@ -165,7 +165,7 @@ def test_screen_drops_an_unresolved_top_order_above_zeros():
     """The restoring orders above the top one are zeros with zero standard error (0 >= 3 x 0):
     they are not resolved orders, so an unresolved q^3 under them is dropped (the bug that kept
     every fitted order under a zero)."""
-    from gmr_jax._reconstruct._reconstruct import _screen
+    from gmr_jax._reconstruct._local_rules import _screen
 
     lib = g.Library(5, 1)
     coef = np.array([[5.0, 9.0, 4.0, 0.6, 0.0, 0.0, 0.0, 8.0, 0.0]])

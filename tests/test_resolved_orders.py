@@ -8,20 +8,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _truth import restoring_l2  # tests/_truth.py
 
 import gmr_jax as g
 from gmr_jax._fit._library import STIFFNESS
 from gmr_jax._reconstruct._degree import average, least_risk_degree, span_curve
-from gmr_jax._reconstruct._reconstruct import (
-    _calibrated,
+from gmr_jax._reconstruct._local_rules import (
     _extend_restoring,
-    _Failure,
     _fit_wells,
     _screen,
     low_order_terms,
 )
+from gmr_jax._reconstruct._reconstruct import _calibrated, _Failure
 from gmr_jax._reconstruct._shape_prior import refit_with_prior
-from _truth import restoring_l2  # tests/_truth.py
 
 
 def _wells(a4, n=4000, amp=0.08, noise=1e-4, seed=0):

@@ -395,7 +395,7 @@ def test_shared_damping_does_not_keep_a_viscous_stand_in(joint, monkeypatch):
     terms left unshared were dropped and both wells ended at v alone, F' 4374 (13) and the law 2.3 % off. Each
     candidate set is now exempt from the threshold and scored on what it leaves once the wells agree: F' back
     within 1 %, the law 0.22 % off."""
-    from gmr_jax._reconstruct import _reconstruct as R
+    from gmr_jax._reconstruct import _local_rules as R
 
     outcome = _sine_outcome(joint, 1)
     slope, _, err = outcome()
@@ -416,7 +416,7 @@ def test_a_screen_that_zeroes_every_damping_term_keeps_one(joint, monkeypatch):
     well kept v (the stand-in of the truth's 10 v^3), F' 4373 (13) for 4488 and the law 1.78 % off. The term
     of the group that leaves the least residual alone is kept where its refit resolves it: v^3 at both wells
     (9.88 and 9.92), F' within 0.3 %, the law 0.17 % off."""
-    from gmr_jax._reconstruct import _reconstruct as R
+    from gmr_jax._reconstruct import _local_rules as R
 
     outcome = _sine_outcome(joint, 3)
     slope, cubic, err = outcome()

@@ -12,11 +12,17 @@ import numpy as np
 from .._coordination._coordinate import GlobalCoefficients, coordinate, split_flat
 from .._coordination._discrepancy import add_discrepancy, calibrate_covariance
 from .._coordination._joint import CONFLICT as JOINT_CONFLICT
-from .._coordination._joint import (JointSettings, RowFilter, damping_faults, joint_coordinate, restoring_faults,
-                                    row_filter)
+from .._coordination._joint import (
+    JointSettings,
+    RowFilter,
+    damping_faults,
+    joint_coordinate,
+    restoring_faults,
+    row_filter,
+)
 from .._errors import GMRInputError
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, Library
-from .._fit._local_fit import AutoThreshold, LocalFit, fit_local, with_constant
+from .._fit._local_fit import AutoThreshold, LocalFit
 from .._fit._stls import STLS, compress, stls_qr
 from .._fit._threshold import default_thresholds, select_threshold
 from .._model._model import GlobalModel
@@ -25,12 +31,28 @@ from .._recordings._derivatives import TONAL, band_edge, tonal_fraction
 from .._recordings._recording import Recording, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
-from . import _design_law, _noise, _resolution, _sanity, _shape_prior
-from ._degree import (averaged_parts, confine_borrowed, degree, least_risk_degree, mixture, odd_degree, odd_gls,
-                      redundancy)
-from ._sanity import GMRDataWarning
-from . import _filter_gain
+from . import _design_law, _filter_gain, _local_rules, _noise, _resolution, _sanity, _shape_prior
+from ._degree import (
+    averaged_parts,
+    confine_borrowed,
+    degree,
+    least_risk_degree,
+    mixture,
+    odd_degree,
+    odd_gls,
+    redundancy,
+)
 from ._filter_gain import apply_gain, gain_segments, matched_target
+from ._local_rules import (
+    _extend_restoring,
+    _fit_wells,
+    _one_of_a_group,
+    _screen,
+    _share_velocity_damping,
+    _under_top_order,
+    low_order_terms,
+)
+from ._sanity import GMRDataWarning
 from ._slow import band_rows, edge_weights, restore_slow, segments
 from ._truncation import with_truncation
 
@@ -254,263 +276,6 @@ def training_scores(model: GlobalModel, recs, masses, topology, rows=None) -> di
                 band.append(float(1.0 - np.sum((yf - hf) ** 2) / tot) if tot > 0 else None)
             out[r.name]["r2_in_band"] = band
     return out
-
-
-def _screen(fits: LocalFit, n_sigma: float, library: Library | None = None) -> LocalFit:
-    """Local coefficients under `n_sigma` standard errors set to zero (and their covariance rows);
-    NumPy in, NumPy out (the bookkeeping after the jitted fits dispatches no JAX operation).
-
-    With `library`, the restoring Taylor series is screened from the top only: a fitted q^m below
-    a kept higher order stays (with its covariance). The coordination takes a zero below a well's
-    highest order as a known zero (Eq. 18), and an unresolved q^3 under a resolved q^4 is not known
-    to be zero (shallow arch, 30 dB, seed 2: the third derivative set to 0 at the second well,
-    restoring error 1.33 -> 3.54 % where the correction for the noise on x moved q^3 below 3
-    standard errors). A coefficient STLS set to zero stays a known zero, as in the paper."""
-    coef, cov = np.asarray(fits.coef), np.asarray(fits.covariance)
-    se = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None))
-    keep = np.abs(coef) >= n_sigma * se
-    if library is not None:
-        idx = library.indices(STIFFNESS)  # q^0 .. q^r
-        kept = keep[:, idx] & (coef[:, idx] != 0)
-        top = np.max(np.where(kept, np.arange(idx.size), -1), axis=1)  # highest kept order per well
-        below = np.arange(idx.size)[None, :] <= top[:, None]
-        keep[:, idx] = kept | (below & (coef[:, idx] != 0))
-    cov = np.where(keep[:, :, None] & keep[:, None, :], cov, 0.0)
-    return eqx.tree_at(lambda f: (f.coef, f.covariance), fits, (np.where(keep, coef, 0.0), cov))
-
-
-def _under_top_order(coef: np.ndarray, library: Library) -> np.ndarray:
-    """(wells, terms): the restoring orders under each well's highest nonzero one (`_screen` keeps
-    them whatever their t)."""
-    idx = library.indices(STIFFNESS)
-    c = np.asarray(coef)[:, idx] != 0
-    top = np.max(np.where(c, np.arange(idx.size), -1), axis=1)
-    out = np.zeros(np.asarray(coef).shape, bool)
-    out[:, idx] = np.arange(idx.size)[None, :] < top[:, None]
-    return out
-
-
-def _set_well(fits: LocalFit, k: int, new: LocalFit) -> LocalFit:
-    """`fits` (stacked over wells, NumPy leaves) with well `k` replaced by `new` (stacked, one well)."""
-    def put(a, b):
-        a = np.array(a)  # a copy: the caller's fits are not changed
-        a[k] = np.asarray(b)[0]
-        return a
-
-    return jax.tree.map(put, fits, new)
-
-
-def low_order_terms(library: Library, restoring_order: int = 1) -> np.ndarray:
-    """Mask of the local terms exempt from the STLS threshold: the restoring Taylor terms
-    x^0 .. x^`restoring_order` and the damping polynomial's v and x v (value and slope)."""
-    keep = {(STIFFNESS, k) for k in range(restoring_order + 1)}
-    keep |= {(VELOCITY_DAMPING, 1), (POSITION_DAMPING, 1)}
-    return np.array([t in keep for t in library.terms()])
-
-
-def _fit_wells(xs, vs, ys, w, library, solver, select, keep=None, noise=None, x_noise=None, band=None):
-    # One jitted fit per well (same shapes: compiled once), stacked. A vmap over wells with
-    # batched weights and the CV threshold sweep stalled in XLA:CPU (jax 0.10), so loop here.
-    noise, x_noise = noise or [None] * xs.shape[0], x_noise or [None] * xs.shape[0]
-    band = band or [None] * xs.shape[0]
-    sols = [fit_local(xs[k], vs[k], ys[k], library, solver, select, weights=w[k], keep=keep, noise=noise[k],
-                      x_noise=x_noise[k], band=band[k], throw=False) for k in range(xs.shape[0])]
-    return _stack(sols)
-
-
-@eqx.filter_jit
-def _stack(trees):
-    """The trees stacked leaf by leaf (one compiled program, not one eager stack per leaf)."""
-    return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *trees)
-
-
-def _shared_law_terms(library: Library) -> np.ndarray:
-    """Mask of the position-independent damping terms sgn(v)|v|^j, j != 1 (one law for every well, Eq. 21;
-    j = 1 is the damping polynomial's C(0) v)."""
-    return np.array([phys == VELOCITY_DAMPING and k != 1 for phys, k in library.terms()])
-
-
-def velocity_terms_not_shared(coef: np.ndarray, library: Library) -> np.ndarray:
-    """Mask of the position-independent damping terms sgn(v)|v|^j, j != 1, that some wells'
-    local fits selected and others did not (`coef`: (wells, terms))."""
-    nonzero = coef != 0
-    return _shared_law_terms(library) & np.any(nonzero, axis=0) & ~np.all(nonzero, axis=0)
-
-
-#: `_share_velocity_damping`'s candidates: their terms exempt from the threshold as the low orders are
-#: (`EXEMPT_TRIED`), each scored on what it leaves once the wells agree (`SCORE_SHARED`); module switches for
-#: the studies' before/after and the tests' teeth
-SCORE_SHARED = EXEMPT_TRIED = True
-
-
-def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_sigma, dof, failure, noise=None,
-                            x_noise=None, band=None):
-    """One set of position-independent damping terms for every well (Eq. 21). Where the wells'
-    fits selected different sets, each well is refitted (its own other terms, at its own threshold)
-    with each candidate set: every well's own selection, their union, their intersection, none and
-    each term of the union alone; the candidate's terms are exempt from the threshold (the t-screen judges
-    them). Terms a refit leaves unshared are dropped and the wells
-    that had them refitted, until every remaining term is shared; the candidate whose shared outcome has the
-    least summed BIC over the wells wins (sum of n log(rss / n) + p log n). Returns the fits and the dropped
-    orders j.
-
-    Scoring the candidates before the wells agree picked a set whose partners then fell away: bistable joint,
-    10 Hz sines, x only, 30 dB, seeds 1-2: the union won, its collinear terms fell to the t-screen beside v at
-    one well, the drop cascaded, and both wells ended at v alone, the stand-in of the truth's 10 v^3 on the
-    fundamental, F' 4374 (13) for 4488 and the law 2.3 % off; now v^4 and v^5 (one seed) or v and v|v| (the
-    other) at both wells, F' within 0.3 % and the law 0.22/0.17 % off.
-
-    The intersection alone (the rule before) dropped a well's correct law where the other well's fit
-    had taken a collinear stand-in: bistable joint, x only, 40 dB, 0.5 degree sweeps, seed 4 with
-    `structured_noise`: v^3 at one well, v at the other; both dropped, the damping fitted as 18.7 v,
-    97 % off over the box."""
-    dropped, noise, x_noise = [], noise or [None] * xs.shape[0], x_noise or [None] * xs.shape[0]
-    band = band or [None] * xs.shape[0]
-    coef0 = np.asarray(fits.coef)
-    vd = _shared_law_terms(library)
-
-    def refit(k, support, thr, tried=None):
-        """Well k refitted on `support` and t-screened; refitted once more on what the screen kept (a
-        term the screen zeroes without a refit leaves the others as they were beside it). `tried`: terms
-        exempt from the threshold as the low orders are (the candidate set: the t-screen judges it)."""
-        slv = eqx.tree_at(lambda s: s.threshold, solver, thr)
-        exempt = keep if tried is None or not EXEMPT_TRIED else kept | tried
-        for _ in range(2):
-            sol = fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=exempt,
-                            support=jnp.asarray(support), noise=noise[k], x_noise=x_noise[k], band=band[k],
-                            throw=False)
-            if sol.result != RESULTS.successful:
-                failure.note(sol.result, f"DOF {dof}, well {k}: refit with the shared damping terms")
-            new = jax.tree.map(lambda a: np.asarray(a)[None], sol.value)
-            if screen_sigma is None:
-                return new
-            screened = _screen(new, screen_sigma, library)
-            kept_now = with_constant(np.asarray(screened.coef[0]) != 0, library)
-            if np.array_equal(kept_now, with_constant(np.asarray(new.coef[0]) != 0, library)):
-                return screened
-            support = kept_now
-        return screened
-
-    kept = np.zeros(vd.size, bool) if keep is None else np.asarray(keep, bool)  # the low orders (v, x v, ...)
-
-    def shared(fits):
-        """Terms some wells kept and others not dropped where kept, those wells refitted, until all agree."""
-        gone = []
-        while np.any(drop := velocity_terms_not_shared(coef := np.asarray(fits.coef), library)):
-            for k in np.nonzero(np.any((coef != 0) & drop[None, :], axis=1))[0]:
-                fits = _set_well(fits, k, refit(k, (with_constant(coef[k] != 0, library) | kept) & ~drop,
-                                                fits.threshold[k]))
-            gone += [k for (_, k), d in zip(library.terms(), drop) if d]
-        return fits, gone
-
-    if np.any(velocity_terms_not_shared(coef0, library)):
-        union = np.any(coef0 != 0, axis=0) & vd
-        masks = [(c != 0) & vd for c in coef0] + [union, np.all(coef0 != 0, axis=0) & vd, np.zeros_like(vd)]
-        masks += [np.arange(vd.size) == j for j in np.nonzero(union)[0]]  # one term alone
-        sets = {tuple(bool(b) for b in m) for m in masks}
-        best = None
-        for cand in sorted(sets):
-            cand = np.array(cand)
-            new_fits = fits
-            for k in range(coef0.shape[0]):
-                support = with_constant((coef0[k] != 0) & ~vd, library) | cand | kept
-                new_fits = _set_well(new_fits, k, refit(k, support, fits.threshold[k], cand))
-            gone = []
-            if SCORE_SHARED:  # each candidate scored on what it leaves once the wells agree
-                new_fits, gone = shared(new_fits)
-            rss, n = np.asarray(new_fits.rss, float), np.asarray(new_fits.n_samples, float)
-            score = float(np.sum(n * np.log(np.maximum(rss, 1e-300) / np.maximum(n, 1.0))
-                                 + np.count_nonzero(np.asarray(new_fits.coef), axis=1) * np.log(np.maximum(n, 2.0))))
-            if np.isfinite(score) and (best is None or score < best[0]):
-                best = (score, new_fits, cand, gone)
-        if best is not None:
-            fits = best[1]
-            dropped += [k for (_, k), d in zip(library.terms(), union & ~best[2]) if d] + best[3]
-    fits, gone = shared(fits)
-    dropped += gone
-    return fits, sorted(set(dropped))
-
-
-def _refit_on(xs, vs, ys, w, library, solver, fits, k: int, mask, noise, x_noise, band):
-    """Well `k` refitted on the support `mask` (at its own threshold, every term of `mask` exempt from it):
-    the `fit_local` Solution on the host. `noise`, `x_noise`, `band`: per-well lists, as `_fit_wells` takes."""
-    slv = eqx.tree_at(lambda s: s.threshold, solver, fits.threshold[k])
-    return jax.device_get(fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=mask, support=mask,
-                                    noise=noise[k], x_noise=x_noise[k], band=band[k], throw=False))
-
-
-#: `_one_of_a_group` runs (a module switch, for the studies' before/after and the tests' teeth)
-ONE_OF_A_GROUP = True
-
-
-def _one_of_a_group(fits, screened, xs, vs, ys, w, library, solver, n_sigma, dof, failure, noise=None, x_noise=None,
-                    band=None):
-    """A well whose damping terms the t-screen zeroed all at once, though its fit had some: collinear terms (on a
-    single tone every power of v is the fundamental's stand-in) share the dissipation, none alone at `n_sigma`.
-    The screen zeroes them without a refit, so the well has no damping and keeps the other coefficients as fitted
-    beside them. Each of those terms alone is refitted (the well's other kept terms, exempt from the threshold) and
-    the one that leaves the least residual is kept where the refit resolves it; where none does, the screened well
-    as it was."""
-    damping = np.array([phys != STIFFNESS for phys, _ in library.terms()])
-    before, after = np.asarray(fits.coef), np.asarray(screened.coef)
-    noise, x_noise = noise or [None] * xs.shape[0], x_noise or [None] * xs.shape[0]
-    band = band or [None] * xs.shape[0]
-    for k in range(before.shape[0]):
-        had = np.nonzero(damping & (before[k] != 0))[0]
-        if had.size == 0 or np.any(damping & (after[k] != 0)):
-            continue
-        best = None
-        for j in had:
-            mask = with_constant(after[k] != 0, library)
-            mask[j] = True
-            sol = _refit_on(xs, vs, ys, w, library, solver, fits, k, mask, noise, x_noise, band)
-            if int(sol.result._value) != int(RESULTS.successful._value):
-                failure.note(sol.result, f"DOF {dof}, well {k}: refit with one of its damping terms")
-                continue
-            c, var = float(sol.value.coef[j]), float(sol.value.covariance[j, j])
-            if var > 0 and abs(c) >= n_sigma * np.sqrt(var) and (best is None or float(sol.value.rss) < best[0]):
-                best = (float(sol.value.rss), sol.value)
-        if best is not None:
-            screened = _set_well(screened, k, _screen(jax.tree.map(lambda a: np.asarray(a)[None], best[1]), n_sigma,
-                                                      library))
-    return screened
-
-
-def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failure, noise=None, x_noise=None,
-                      upto: int | None = None, band=None):
-    """Raise each well's local restoring order while the next Taylor term is significant.
-
-    STLS judges a term by its share of the local force, so a restoring q^(r+1) that the data
-    resolve (|t| >= `n_sigma`) can be a tiny share of it and be thresholded away; its omission
-    then biases the kept q^(r-1) (q^4 and q^2, q^5 and q^3 are correlated about a well), and the
-    coordination takes that bias as exact. Torque-free Kresling chain, deployed well of cell 2,
-    1 mm, seed 3: q^4 at t = 59 dropped, q^3 biased by +2.1 % (35 standard errors), restoring
-    error 2.75 % against the exact-Taylor oracle's 1.68 %. Each well is refitted on its support plus
-    q^(r+1) (at its own threshold, the support kept); the term stays if the refit resolves it,
-    and the next order is tried, up to q^`upto` (default: the library's restoring order). Returns
-    the fits and, per well, the orders added."""
-    idx = library.indices(STIFFNESS)  # q^0 .. q^r, in order
-    added, noise = [[] for _ in range(xs.shape[0])], noise or [None] * xs.shape[0]
-    x_noise, band = x_noise or [None] * xs.shape[0], band or [None] * xs.shape[0]
-    for k in range(xs.shape[0]):
-        while True:
-            coef = np.asarray(fits.coef[k])
-            top = max([j for j, c in enumerate(coef[idx]) if c != 0], default=0)
-            if top >= (library.restoring_order if upto is None else min(upto, library.restoring_order)):
-                break
-            mask = with_constant(coef != 0, library)
-            mask[idx[top + 1]] = True
-            sol = _refit_on(xs, vs, ys, w, library, solver, fits, k, mask, noise, x_noise, band)
-            c = float(sol.value.coef[idx[top + 1]])
-            se = float(np.sqrt(max(float(sol.value.covariance[idx[top + 1], idx[top + 1]]), 0.0)))
-            if int(sol.result._value) != int(RESULTS.successful._value) or not abs(c) >= n_sigma * se:
-                break
-            new = _screen(jax.tree.map(lambda a: np.asarray(a)[None], sol.value), n_sigma, library)
-            if float(new.coef[0, idx[top + 1]]) == 0.0:
-                break
-            fits = _set_well(fits, k, new)
-            added[k].append(top + 1)
-    return fits, added
 
 
 def _recorded_speed(vs, w) -> float:
@@ -1156,7 +921,7 @@ def reconstruct(
         eiv = _eiv_report(x_noise, xs, w, sols.stats.get("eiv_applied"))
         if screen_sigma is not None:
             screened = _screen(fits, screen_sigma, library)
-            if ONE_OF_A_GROUP:
+            if _local_rules.ONE_OF_A_GROUP:
                 screened = _one_of_a_group(fits, screened, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
                                            noise, x_noise, band)
             fits = screened
