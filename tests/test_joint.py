@@ -66,6 +66,22 @@ def test_inadmissible_names_each_failure():
     assert any("feeds energy in" in r for r in inadmissible([0, -1, 0, 1], [0, 0.1], [0, 0, -0.2], eq, 3.0))
     # v^3 with a negative coefficient: dissipative at low speed only
     assert any("feeds energy in" in r for r in inadmissible([0, -1, 0, 1], [0, 0.1, 0, -0.1], [0], eq, 3.0))
+    # a negative friction: dissipative above |v| = 0.1 only, below the grid's lowest speed (0.075) its power is
+    # within the tolerance of the grid check; it feeds energy in as v -> 0 wherever it is
+    assert any("friction" in r and "feeds energy in" in r for r in inadmissible([0, -1, 0, 1], [-0.01, 0.1], [0],
+                                                                                   eq, 3.0))
+    assert inadmissible([0, -1, 0, 1], [0.01, 0.1], [0], eq, 3.0) == []
+
+
+def test_joint_never_takes_a_negative_friction():
+    """Data whose damping is 0.3 v - 0.02 sgn(v) (energy fed in at |v| < 0.067): the candidate with the friction
+    term fits them best but cannot be admitted; the law keeps no negative friction."""
+    f = lambda x: -x + x**3  # noqa: E731
+    xs, vs, ys = _samples(f, 0.3, noise=1e-4)
+    ys = ys - 0.02 * np.sign(vs)
+    s = JointSettings(velocity_orders=(0,))
+    _, vdamp, _, _, st = joint_coordinate(xs, vs, ys, np.ones_like(xs), np.array([-1.0, 1.0]), np.ones(2), 5.0, s)
+    assert st["joint_n_admissible"] > 0 and vdamp[0] >= 0.0, vdamp
 
 
 @pytest.fixture(scope="module")

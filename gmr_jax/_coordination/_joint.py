@@ -265,6 +265,8 @@ def _select(gram, rhs, yy, n, omega_r, omega_d, masks, lam_r, lam_d, log_r, log_
         confines = (theta[rr][lead] > 0) & (lead % 2 == 1)
         dissipation = grid_d @ theta[rr.stop:]
         dissipative = jnp.all(dissipation >= -DISSIPATION_TOLERANCE * jnp.max(jnp.abs(dissipation)))
+        if 0 in layout.vel:  # a negative friction feeds energy in below the grid's lowest speed (`damping_faults`)
+            dissipative = dissipative & (theta[layout.k + layout.j + 2 + layout.vel.index(0)] >= 0)
         return theta, ainv, rss, edf, bic, sign_changes, confines, dissipative
 
     return jax.vmap(one)(jnp.asarray(masks), jnp.asarray(lam_r), jnp.asarray(lam_d), *(jnp.asarray(a) for a in pen))
@@ -543,12 +545,15 @@ def _restoring_faults(stiffness, equilibria) -> list[tuple[tuple[str, int], str]
 def damping_faults(velocity_damping, position_damping, equilibria, speed: float) -> list[str]:
     """Why a global damping law of one DOF is not admissible, or []: it must dissipate,
     D(x, v) v >= 0 (within `DISSIPATION_TOLERANCE`) and not identically 0, over the span of use
-    (as `restoring_faults`) and |v| <= `speed`."""
+    (as `restoring_faults`) and |v| <= `speed`; a negative friction b_0 sgn(v) feeds energy in as v -> 0
+    (below the check grid's lowest speed) wherever it is."""
     eq = np.asarray(equilibria, float)
     lo, hi = float(eq.min()), float(eq.max())
     half = 0.5 * (hi - lo)
     xx, vv = np.meshgrid(np.linspace(lo - half, hi + half, 41), np.linspace(0.0, speed, 41)[1:], indexing="ij")
     b = np.asarray(velocity_damping, float)
+    if b.size and b[0] < 0:  # D v -> b_0 |v| as v -> 0, below any grid's lowest speed
+        return [f"its friction b_0 sgn(v) is negative ({b[0]:.4g}): it feeds energy in at low speed"]
     dv = np.polynomial.polynomial.polyval(xx, np.asarray(position_damping, float)) * vv**2
     dv = dv + sum(b[j] * vv ** (j + 1) for j in range(b.size))
     if not np.any(dv > 0):

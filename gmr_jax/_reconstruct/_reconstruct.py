@@ -44,6 +44,7 @@ from ._degree import (
 )
 from ._filter_gain import apply_gain, gain_segments, matched_target
 from ._local_rules import (
+    _dissipative_at_rest,
     _extend_restoring,
     _fit_wells,
     _one_of_a_group,
@@ -928,15 +929,22 @@ def reconstruct(
         codes = np.asarray(sols.result._value)
         for k in np.nonzero(codes != RESULTS.successful._value)[0]:
             failure.note(codes[k], f"DOF {i}, well {k}: local fit")
-        dropped = []
+        dropped, at_rest = [], []
+        if _local_rules.DISSIPATIVE_AT_REST:
+            fits, at_rest = _dissipative_at_rest(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
+                                                 noise, x_noise, band)
         if shared_damping:
             fits, dropped = _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_sigma, i,
                                                     failure, noise, x_noise, band)
+            if _local_rules.DISSIPATIVE_AT_REST:
+                fits, again = _dissipative_at_rest(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
+                                                   noise, x_noise, band, shared=True)
+                at_rest = sorted(set(at_rest) | set(again))
         added = [[] for _ in groups]
         if extend_restoring and screen_sigma is not None:
             fits, added = _extend_restoring(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure, noise,
                                             x_noise, extend_upto, band)
-        local.append((labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band))
+        local.append((labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band, at_rest))
         # estimated accelerations: the joint regression on low-passed rows (`row_filter`; shallow arch, x only,
         # 30 dB, 0.45 % sweeps, seeds 0-1: 8.31/8.81 % on raw rows, degree 13; 1.35/6.11 % filtered, degree 7)
         segs_all.append(segs)
@@ -950,7 +958,7 @@ def reconstruct(
         plan, design = _shape_prior.share_curvature([loc[6] for loc in local], library,
                                                     screen_sigma if screen_sigma is not None else 3.0)
     for i in range(d):
-        labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band = local[i]
+        labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band, at_rest = local[i]
         data_fits = fits  # the local fits from the data alone (reported; the resolution report reads them)
         borrowed, design_why = [], None
         if plan[i] is not None:
@@ -1020,8 +1028,8 @@ def reconstruct(
             thresholds=np.asarray(data_fits.threshold),
             recordings_per_well=[[recs[k].name for k in g] for g in groups],
             stats={k: np.asarray(v).tolist() for k, v in coord.stats.items()}
-            | {"dropped_velocity_damping": dropped, "restoring_orders_added": added, "errors_in_variables": eiv,
-               "coordination": route,
+            | {"dropped_velocity_damping": dropped, "negative_friction_dropped": at_rest,
+               "restoring_orders_added": added, "errors_in_variables": eiv, "coordination": route,
                "paper_route_rejected": why, "shared_design": _design_stats(design, i, borrowed, design_why, coord),
                "escapes": _sanity.escapes(np.asarray(g.stiffness), eq)},
         ))
