@@ -7,7 +7,12 @@ import numpy as np
 import pytest
 
 import gmr_jax as g
-from gmr_jax._coordination._joint import JointSettings, inadmissible, joint_coordinate, restoring_fault_kinds
+from gmr_jax._coordination._joint import (
+    JointSettings,
+    inadmissible,
+    joint_coordinate,
+    restoring_fault_kinds,
+)
 
 
 def _samples(f, c, wells=(-1.0, 1.0), amp=0.05, n=3000, noise=1e-3, seed=0):
@@ -161,10 +166,10 @@ def test_default_replaces_an_untested_outward_turn():
     cross-well motion escapes (it diverged, silently). The default replaces it by the joint
     regression, which explains both wells as well, confines, and stays bounded when driven across
     the wells (checked with scipy's integrator, not the library's)."""
-    from scipy.integrate import solve_ivp
-
     import sys
     from pathlib import Path
+
+    from scipy.integrate import solve_ivp
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "studies"))
     import single_tone as st
