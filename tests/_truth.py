@@ -1,5 +1,6 @@
 """Independent measures for the tests: a fitted law against the truth, by NumPy (not `gmr.metrics`)."""
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -11,3 +12,17 @@ def restoring_l2(system, stiffness, n: int = 401):
     truth = np.array([float(system.truth.restoring(jnp.asarray([x]))[0]) for x in xs])
     model = np.polynomial.polynomial.polyval(xs, np.asarray(stiffness, float))
     return float(np.linalg.norm(model - truth) / np.linalg.norm(truth)), model, truth
+
+
+def damping_coverage(model, system, level: float = 0.95) -> float:
+    """Share of the grid span x v_range (41 x 40 points, v != 0) of a single-DOF system where the band of level
+    `level` on the model's damping force holds the truth's, as `studies/coverage.py` measures it."""
+    import gmr_jax as g
+
+    eq = system.equilibria[:, 0]
+    vs = np.linspace(*system.v_range[0], 41)
+    xx, vv = (a.ravel() for a in np.meshgrid(np.linspace(eq.min(), eq.max(), 41), vs[vs != 0], indexing="ij"))
+    x, v = jnp.asarray(xx)[:, None], jnp.asarray(vv)[:, None]
+    band = jax.vmap(lambda p, q: g.force_band(model, p, q, part="damping", level=level))(x, v)
+    truth = np.asarray(jax.vmap(system.truth.damping)(x, v))[:, 0]
+    return float(np.mean((truth >= np.asarray(band.lower)[:, 0]) & (truth <= np.asarray(band.upper)[:, 0])))

@@ -3,25 +3,11 @@ other test modules do not cover: a negative friction term is not kept (issue 15)
 
 import warnings
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
+from _truth import damping_coverage  # tests/_truth.py
 
 import gmr_jax as g
-
-
-def _damping_coverage(model, system, level=0.95):
-    """Share of the grid span x v_range (41 x 40, v != 0) where the band of level `level` on the damping force
-    holds the truth's, as `studies/coverage.py` measures it."""
-    eq = system.equilibria[:, 0]
-    xx, vv = (a.ravel() for a in np.meshgrid(np.linspace(eq.min(), eq.max(), 41),
-                                             np.linspace(*system.v_range[0], 41)[np.linspace(*system.v_range[0], 41)
-                                                                                 != 0], indexing="ij"))
-    x, v = jnp.asarray(xx)[:, None], jnp.asarray(vv)[:, None]
-    band = jax.vmap(lambda p, q: g.force_band(model, p, q, part="damping", level=level))(x, v)
-    truth = np.asarray(jax.vmap(system.truth.damping)(x, v))[:, 0]
-    return float(np.mean((truth >= np.asarray(band.lower)[:, 0]) & (truth <= np.asarray(band.upper)[:, 0])))
 
 
 @pytest.mark.slow  # two reconstructions of a coverage-study case (~40 s)
@@ -42,7 +28,7 @@ def test_a_negative_friction_is_not_kept(monkeypatch):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             sol = g.reconstruct(recs, library, throw=False)
-        return sol, _damping_coverage(sol.value, system)
+        return sol, damping_coverage(sol.value, system)
 
     sol, covered = outcome()
     assert sol.stats["dofs"][0].stats["negative_friction_dropped"] == [0, 1]
