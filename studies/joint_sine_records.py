@@ -70,7 +70,10 @@ def main():
         lines.append("")
         lines.append(f"- {label}: median {100 * np.median(errs):.3g} %, max {100 * errs.max():.3g} %, blown-up laws "
                      f"{sum(r[7] for r in rows if r[2] == label)} of {errs.size}.")
-    Path(args.out).write_text("\n".join(lines) + "\n")
+    # the hand-written sections below the table (each stop's before/after) are kept
+    out = Path(args.out)
+    kept = out.read_text().split("\n## ", 1)[1] if out.exists() and "\n## " in out.read_text() else None
+    out.write_text("\n".join(lines) + "\n" + ("" if kept is None else "\n## " + kept))
     print("wrote", args.out)
 
 
