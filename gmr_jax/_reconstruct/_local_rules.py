@@ -67,6 +67,18 @@ def _set_well(fits: LocalFit, k: int, new: LocalFit) -> LocalFit:
     return jax.tree.map(put, fits, new)
 
 
+def _as_well(value) -> LocalFit:
+    """One well's `fit_local` value as fits stacked over one well (NumPy leaves), as `_set_well` takes them."""
+    return jax.tree.map(lambda a: np.asarray(a)[None], value)
+
+
+def _summed_bic(fits: LocalFit) -> float:
+    """The BIC summed over the wells, sum of n log(rss / n) + p log n (p: the well's nonzero terms)."""
+    rss, n = np.asarray(fits.rss, float), np.asarray(fits.n_samples, float)
+    return float(np.sum(n * np.log(np.maximum(rss, 1e-300) / np.maximum(n, 1.0))
+                        + np.count_nonzero(np.asarray(fits.coef), axis=1) * np.log(np.maximum(n, 2.0))))
+
+
 def low_order_terms(library: Library, restoring_order: int = 1) -> np.ndarray:
     """Mask of the local terms exempt from the STLS threshold: the restoring Taylor terms
     x^0 .. x^`restoring_order` and the damping polynomial's v and x v (value and slope)."""
@@ -148,7 +160,7 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
                             throw=False)
             if sol.result != RESULTS.successful:
                 failure.note(sol.result, f"DOF {dof}, well {k}: refit with the shared damping terms")
-            new = jax.tree.map(lambda a: np.asarray(a)[None], sol.value)
+            new = _as_well(sol.value)
             if screen_sigma is None:
                 return new
             screened = _screen(new, screen_sigma, library)
@@ -185,9 +197,7 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
             gone = []
             if SCORE_SHARED:  # each candidate scored on what it leaves once the wells agree
                 new_fits, gone = shared(new_fits)
-            rss, n = np.asarray(new_fits.rss, float), np.asarray(new_fits.n_samples, float)
-            score = float(np.sum(n * np.log(np.maximum(rss, 1e-300) / np.maximum(n, 1.0))
-                                 + np.count_nonzero(np.asarray(new_fits.coef), axis=1) * np.log(np.maximum(n, 2.0))))
+            score = _summed_bic(new_fits)
             if np.isfinite(score) and (best is None or score < best[0]):
                 best = (score, new_fits, cand, gone)
         if best is not None:
@@ -238,7 +248,7 @@ def _one_of_a_group(fits, screened, xs, vs, ys, w, library, solver, n_sigma, dof
             if var > 0 and abs(c) >= n_sigma * np.sqrt(var) and (best is None or float(sol.value.rss) < best[0]):
                 best = (float(sol.value.rss), sol.value)
         if best is not None:
-            screened = _set_well(screened, k, _screen(jax.tree.map(lambda a: np.asarray(a)[None], best[1]), n_sigma,
+            screened = _set_well(screened, k, _screen(_as_well(best[1]), n_sigma,
                                                       library))
     return screened
 
@@ -272,7 +282,7 @@ def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failur
             se = float(np.sqrt(max(float(sol.value.covariance[idx[top + 1], idx[top + 1]]), 0.0)))
             if int(sol.result._value) != int(RESULTS.successful._value) or not abs(c) >= n_sigma * se:
                 break
-            new = _screen(jax.tree.map(lambda a: np.asarray(a)[None], sol.value), n_sigma, library)
+            new = _screen(_as_well(sol.value), n_sigma, library)
             if float(new.coef[0, idx[top + 1]]) == 0.0:
                 break
             fits = _set_well(fits, k, new)
@@ -311,7 +321,7 @@ def _dissipative_at_rest(fits, xs, vs, ys, w, library, solver, n_sigma, dof, fai
         if int(sol.result._value) != int(RESULTS.successful._value):
             failure.note(sol.result, f"DOF {dof}, well {k}: refit without a negative friction term")
             continue
-        new = jax.tree.map(lambda a: np.asarray(a)[None], sol.value)
+        new = _as_well(sol.value)
         fits = _set_well(fits, k, new if n_sigma is None else _screen(new, n_sigma, library))
     return fits, [int(k) for k in wells]
 
@@ -336,7 +346,8 @@ def _extend_damping(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failure,
     errors above 0), and the candidate that lowers the BIC summed over the wells most (n log(rss / n) + p log n),
     by more than `EXTEND_DAMPING_EVIDENCE`, is kept at all of them (one law for every well, Eq. 21). Shallow
     arch (0.18 v + 0.05 v|v|), 0.05 sweeps, 40 dB, seed 1: v|v| at t = 35 / 24 at the wells, dropped; kept, 0.181 v
-    + 0.0488 v|v| and the damping band's coverage 53 -> 100 % (30 dB: 35 -> 100 %); v^3 and higher powers also resolve, 64 worse. On single tones the
+    + 0.0488 v|v| and the damping band's coverage 53 -> 100 % (30 dB: 35 -> 100 %); v^3 and higher powers also
+    resolve, 64 worse. On single tones the
     powers of v are collinear: a term that resolves there stands in for another unless the evidence is strong.
     Returns the fits and the orders j added."""
     terms = library.terms()
@@ -344,12 +355,7 @@ def _extend_damping(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failure,
     noise, x_noise = noise or [None] * xs.shape[0], x_noise or [None] * xs.shape[0]
     band = band or [None] * xs.shape[0]
 
-    def bic(f):
-        rss, n = np.asarray(f.rss, float), np.asarray(f.n_samples, float)
-        return float(np.sum(n * np.log(np.maximum(rss, 1e-300) / np.maximum(n, 1.0))
-                            + np.count_nonzero(np.asarray(f.coef), axis=1) * np.log(np.maximum(n, 2.0))))
-
-    best = (bic(fits) - EXTEND_DAMPING_EVIDENCE, None, None)
+    best = (_summed_bic(fits) - EXTEND_DAMPING_EVIDENCE, None, None)
     for j, (phys, order) in enumerate(terms):
         if phys != VELOCITY_DAMPING or order == 1 or np.any(coef0[:, j] != 0):
             continue
@@ -359,15 +365,16 @@ def _extend_damping(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failure,
             mask[j] = True
             sol = _refit_on(xs, vs, ys, w, library, solver, fits, k, mask, noise, x_noise, band)
             c, var = float(sol.value.coef[j]), float(sol.value.covariance[j, j])
-            if int(sol.result._value) != int(RESULTS.successful._value) or not (var > 0 and c >= n_sigma * np.sqrt(var)):
+            failed = int(sol.result._value) != int(RESULTS.successful._value)
+            if failed or not (var > 0 and c >= n_sigma * np.sqrt(var)):
                 new_fits = None
                 break
-            new = _screen(jax.tree.map(lambda a: np.asarray(a)[None], sol.value), n_sigma, library)
+            new = _screen(_as_well(sol.value), n_sigma, library)
             if float(new.coef[0, j]) == 0.0:
                 new_fits = None
                 break
             new_fits = _set_well(new_fits, k, new)
-        if new_fits is not None and (score := bic(new_fits)) < best[0]:
+        if new_fits is not None and (score := _summed_bic(new_fits)) < best[0]:
             best = (score, new_fits, order)
     if best[1] is None:
         return fits, []
