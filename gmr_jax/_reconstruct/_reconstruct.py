@@ -32,6 +32,7 @@ from .._recordings._recording import Recording, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
 from . import _design_law, _filter_gain, _local_rules, _noise, _resolution, _sanity, _shape_prior
+from ._damping_slopes import add_slope_vectors, slope_vectors, unresolved_slopes
 from ._degree import (
     averaged_parts,
     confine_borrowed,
@@ -1026,6 +1027,11 @@ def reconstruct(
                 float(xall.max()))
         # a DOF that borrowed was coordinated with odd degrees only: its discrepancy is that degree choice's
         g, cov_i = _calibrated(coord, fits, library, route, paper_sound, confining or any(borrowed))
+        # a well that fixes the damping's value only: its slope's noise, in the band (`_damping_slopes`)
+        slopes = unresolved_slopes(data_fits, xs, vs, ys, w, library, solver, noises[i], x_noises[i], band)
+        cov_i = add_slope_vectors(cov_i, *(np.asarray(a).shape[0] for a in (g.stiffness, g.velocity_damping,
+                                                                             g.position_damping)),
+                                  slope_vectors(eq, *slopes))
         se = GlobalCoefficients(*(np.pad(np.asarray(a), (0, np.asarray(b).shape[0] - np.asarray(a).shape[0]))
                                   for a, b in zip((se.stiffness, se.velocity_damping, se.position_damping),
                                                   (g.stiffness, g.velocity_damping, g.position_damping))))
