@@ -58,7 +58,7 @@ def test_the_tip_cell_band_holds_the_damping_it_does_not_resolve(monkeypatch):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             model = g.reconstruct(recs, g.Library(*system.orders["gmr"]), throw=False).value
-        band = jax.vmap(lambda p, q: g.force_band(model, p, q, part="damping", level=0.95))(x, v)
+        band = jax.vmap(lambda p, q, m=model: g.force_band(m, p, q, part="damping", level=0.95))(x, v)
         low, up = np.asarray(band.lower)[:, i], np.asarray(band.upper)[:, i]
         cover[on] = float(np.mean((truth >= low) & (truth <= up)))
         means[on] = np.asarray(band.mean)[:, i]

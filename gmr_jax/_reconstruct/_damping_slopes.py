@@ -17,7 +17,9 @@ the n wells with H_k(x_j) = 0 at every well, H_k'(x_j) = 1 at well k and 0 at th
 holds that difference and the slope's noise, (c_k^2 + s_k^2) H_k H_k', for every such well (a
 threshold's choice, as the joint route's degree choice, `joint_alternative`, enters its band). The
 law's mean keeps the slope the coordination gave it. A well that kept x v adds nothing: its
-covariance is already in the coordination's.
+covariance is already in the coordination's. Only on the paper route's damping (`reconstruct`): where
+the joint regression fitted the damping (routes "joint", "gls + joint damping"), its candidates held
+the position terms and its own degree choice is in its band.
 """
 
 import numpy as np

@@ -1027,11 +1027,14 @@ def reconstruct(
                 float(xall.max()))
         # a DOF that borrowed was coordinated with odd degrees only: its discrepancy is that degree choice's
         g, cov_i = _calibrated(coord, fits, library, route, paper_sound, confining or any(borrowed))
-        # a well that fixes the damping's value only: its slope's noise, in the band (`_damping_slopes`)
-        slopes = unresolved_slopes(data_fits, xs, vs, ys, w, library, solver, noises[i], x_noises[i], band)
-        cov_i = add_slope_vectors(cov_i, *(np.asarray(a).shape[0] for a in (g.stiffness, g.velocity_damping,
-                                                                             g.position_damping)),
-                                  slope_vectors(eq, *slopes))
+        # a well that fixes the damping's value only: the slope it leaves open, in the band (`_damping_slopes`);
+        # not where the joint regression fitted the damping to every well's data with its own position terms
+        # (magnet, 0.05 sweeps, 60 dB: the joint's constant C, band 0.056 % wide, would be 2.96 % wide)
+        if "joint" not in route:
+            slopes = unresolved_slopes(data_fits, xs, vs, ys, w, library, solver, noises[i], x_noises[i], band)
+            cov_i = add_slope_vectors(cov_i, *(np.asarray(a).shape[0] for a in (g.stiffness, g.velocity_damping,
+                                                                                 g.position_damping)),
+                                      slope_vectors(eq, *slopes))
         se = GlobalCoefficients(*(np.pad(np.asarray(a), (0, np.asarray(b).shape[0] - np.asarray(a).shape[0]))
                                   for a, b in zip((se.stiffness, se.velocity_damping, se.position_damping),
                                                   (g.stiffness, g.velocity_damping, g.position_damping))))
