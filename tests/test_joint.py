@@ -346,7 +346,8 @@ def test_joint_damping_dissipates_below_the_recorded_speeds():
 def test_truncation_at_the_cap_estimates_the_series_tail(monkeypatch):
     """`_joint._truncation`: at the degree cap, the best laws of degrees K, K - 2, K - 4 (a series whose
     terms shrink by r per two degrees) give the convergence ratio and the geometric tail, spread over T_K and
-    T_(K-1) on the span so that the band never pinches; below the cap (or switched off) nothing."""
+    T_(K-1) on the span so that the band never pinches; below the cap, at a cap that is a choice
+    (`JointSettings.truncation` False) or switched off, nothing."""
     from gmr_jax._coordination import _joint
 
     layout = _joint._Layout(5, 0, ())
@@ -375,6 +376,8 @@ def test_truncation_at_the_cap_estimates_the_series_tail(monkeypatch):
     below = JointSettings(max_degree=7, max_damping_degree=0, velocity_orders=())
     assert _joint._truncation(meta, theta, bic, np.eye(8 + 1), _joint._Layout(7, 0, ()), (5, 0, ()), (lo, hi),
                               below)[2] == 0.0
+    chosen_cap = JointSettings(max_degree=5, max_damping_degree=0, velocity_orders=(), truncation=False)
+    assert _joint._truncation(meta, theta, bic, lin, layout, (5, 0, ()), (lo, hi), chosen_cap)[2] == 0.0
     monkeypatch.setattr(_joint, "TRUNCATION", False)
     cov_off, _, tail_off = _joint._truncation(meta, theta, bic, lin, layout, (5, 0, ()), (lo, hi), settings)
     assert tail_off == 0.0 and not cov_off.any()

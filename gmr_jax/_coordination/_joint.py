@@ -109,6 +109,8 @@ class JointSettings(eqx.Module):
       extrapolates most tamely wins: the lowest highest velocity power (v|v| before v^3: single-tone
       records at |v| <= 0.2 cannot tell them apart, and v^3 damps 5 x too hard at 3), then the lowest
       degrees K and J. 0: the best score.
+    - `truncation`: at `max_degree`, the band holds the series' estimated tail (`TRUNCATION`, `_truncation`);
+      False where the cap is a choice, not the data's limit (`reconstruct`'s replacement of a paper route).
     """
 
     max_degree: int = eqx.field(static=True, default=13)
@@ -119,6 +121,7 @@ class JointSettings(eqx.Module):
     log_lambdas_damping: tuple = eqx.field(static=True, default=(-8.0, -4.0, 0.0))
     damping_only: bool = eqx.field(static=True, default=False)
     tie: float = eqx.field(static=True, default=0.0)
+    truncation: bool = eqx.field(static=True, default=True)
 
 
 def chebyshev(u, degree: int):
@@ -557,7 +560,7 @@ def _truncation(meta, theta, bic, lin, layout: _Layout, chosen, span, settings: 
     band's RMS over the span is about s."""
     n = lin.shape[0]
     k, j, vel = chosen
-    if not TRUNCATION or settings.damping_only or k != layout.k:
+    if not (TRUNCATION and settings.truncation) or settings.damping_only or k != layout.k:
         return np.zeros((n, n)), 0.0, 0.0
 
     def best_of(degree):
