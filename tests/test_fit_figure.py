@@ -77,3 +77,28 @@ def test_figure_band_equals_force_band():
     ref = jax.vmap(lambda xx: gmr.force_band(model, xx))(x)
     np.testing.assert_allclose(lo, ref.lower, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(hi, ref.upper, rtol=1e-10, atol=1e-12)
+
+
+def test_figure_damping_band_equals_force_band():
+    """The damping panel's band (`_damping_band`, NumPy) is `force_band(part="damping")` at speeds away from 0
+    (where the model's smoothed sign is the sign), position-dependent terms included."""
+    import jax
+
+    from gmr_jax.plots._fit import _damping_band
+
+    terms = [{"dof": 0, "physics": "stiffness", "order": k, "coefficient": c} for k, c in ((1, -4.0), (3, 4.0))]
+    terms += [{"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.2},
+              {"dof": 0, "physics": "velocity_damping", "order": 2, "coefficient": 0.05},
+              {"dof": 0, "physics": "position_damping", "order": 2, "coefficient": 0.3}]
+    base = gmr.from_terms([1.0], terms)
+    p = base.stiffness.shape[1] + base.velocity_damping.shape[1] + base.position_damping.shape[1]
+    a = np.random.default_rng(2).normal(size=(p, p))
+    model = gmr.GlobalModel(masses=base.masses, stiffness=base.stiffness, velocity_damping=base.velocity_damping,
+                            position_damping=base.position_damping, covariance=(a @ a.T)[None] * 1e-2)
+    x = np.repeat(np.linspace(-1.5, 1.5, 4), 4)[:, None]
+    v = np.tile([-2.0, -0.5, 0.5, 2.0], 4)[:, None]
+    lo, hi = _damping_band(model)(x, v)
+    ref = jax.vmap(lambda xx, vv: gmr.force_band(model, xx, vv, part="damping"))(x, v)
+    np.testing.assert_allclose(lo, ref.lower, rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(hi, ref.upper, rtol=1e-8, atol=1e-10)
+    assert np.all(hi - lo > 0)

@@ -33,6 +33,32 @@ def _model_band(model, level: float = 0.95):
     return band
 
 
+def _damping_band(model, level: float = 0.95):
+    """(x, v) (n, dof) each -> (lower, upper) of the `level` band of F_d from the model's covariance, as
+    `force_band(part="damping")` gives it (sgn(v)|v|^j and x^j v columns; the exact sign, not the smoothed one), in
+    NumPy; None without a covariance."""
+    cov = getattr(model, "covariance", None)
+    if cov is None:
+        return None
+    from statistics import NormalDist
+
+    z = NormalDist().inv_cdf(0.5 + level / 2)
+    ns, nv = np.asarray(model.stiffness).shape[1], np.asarray(model.velocity_damping).shape[1]
+    npd = np.asarray(model.position_damping).shape[1]
+    coef = np.concatenate([np.asarray(model.velocity_damping, float), np.asarray(model.position_damping, float)], 1)
+    c = np.asarray(cov, float)[:, ns : ns + nv + npd, ns : ns + nv + npd]
+
+    def band(X, V):
+        X, V = np.asarray(X, float), np.asarray(V, float)
+        vel = np.sign(V)[:, :, None] * np.abs(V)[:, :, None] ** np.arange(nv)
+        phi = np.concatenate([vel, X[:, :, None] ** np.arange(npd) * V[:, :, None]], axis=2)
+        mean = np.einsum("ndk,dk->nd", phi, coef)
+        se = np.sqrt(np.maximum(np.einsum("ndj,djk,ndk->nd", phi, c, phi), 0.0))
+        return mean - z * se, mean + z * se
+
+    return band
+
+
 def _dress(ax, xlabel: str, ylabel: str, title: str) -> None:
     """The zero line, labels, title and legend every panel of the figure carries."""
     ax.axhline(0.0, color="0.7", lw=0.8)
@@ -55,12 +81,14 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
       model's F(x, v), against time, with its NRMSE per recording.
 
     `recordings`: the `Recording`s the model was fitted on (v and a are estimated where
-    missing, as `reconstruct` does). `band`: "auto" (default) draws the model's 95 % band of
-    F_r (`force_band`) when it carries a covariance (`reconstruct` sets one); None draws none;
-    or a callable `x (n, dof) -> (lower, upper)`, each (n, dof). Saved (PNG, or PDF by suffix) to
+    missing, as `reconstruct` does). `band`: "auto" (default) draws the model's 95 % bands of
+    F_r and F_d (`force_band`) when it carries a covariance (`reconstruct` sets one); None draws none;
+    or a callable `x (n, dof) -> (lower, upper)`, each (n, dof), for F_r (then no band on F_d). Saved (PNG, or PDF by suffix) to
     `path` when given; returns the matplotlib `Figure`."""
     recs = [r.complete(model.topology) for r in recordings]
-    band = _model_band(model) if isinstance(band, str) and band == "auto" else band
+    auto = isinstance(band, str) and band == "auto"
+    band = _model_band(model) if auto else band
+    damping_band = _damping_band(model) if auto else None
     masses = np.asarray(model.masses, float)
     d = model.n_dof
     height = 3.0 * d + 0.7
@@ -103,9 +131,13 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
             V[:, i] = vs
             fd = forces(model, Xv, V, parts=True)[1][:, i]
             ax_d.plot(vs, fd, "-", color=col, lw=1.5, label=f"{r.name} (x = {np.mean(r.x[:, i]):.3g})")
+            if damping_band is not None:
+                dlo, dhi = (np.asarray(b)[:, i] for b in damping_band(Xv, V))
+                ax_d.fill_between(vs, dlo, dhi, color=col, alpha=0.35, lw=0)
             ax_d.axvspan(float(np.min(r.v[:, i])), float(np.max(r.v[:, i])), color=col, alpha=0.15, lw=0)
         _dress(ax_d, f"velocity ({x_unit}/s)", f"damping force ({force_unit})",
-               "damping force at each well (shaded: recorded speeds)")
+               "damping force at each well (light: recorded speeds" + ("; 95 % band)" if damping_band is not None
+                                                                        else ")"))
 
         for k, r in enumerate(recs):
             col = COLOURS[k % len(COLOURS)]
