@@ -805,7 +805,8 @@ def reconstruct(
       `keep_restoring_order`: with a estimated, a higher order absorbs the differentiation
       filter's gain error); with a estimated and `structured_noise`, on up to q^2 only (the
       curvature; at 60 dB x only the next order took the Savitzky-Golay bias for a q^3 and the
-      paper route's degree-7 law was 1650 % off).
+      paper route's degree-7 law was 1650 % off), and there q^2 is kept whatever its t, with its
+      covariance (`_local_rules.FILL_CURVATURE`; magnet, x only, 30 dB: 44.8 -> 19.1 %).
 
     - `shared_design`: with several DOFs, cells of one design (the same wells at the same
       relative positions, Taylor ratios that agree across cells: `_shape_prior`) lend the
@@ -959,8 +960,9 @@ def reconstruct(
                                                   noise, x_noise, band)
         added = [[] for _ in groups]
         if extend_restoring and screen_sigma is not None:
-            fits, added = _extend_restoring(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure, noise,
-                                            x_noise, extend_upto, band)
+            fill = extend_upto == 2 and _local_rules.FILL_CURVATURE  # F'' whatever its t (`FILL_CURVATURE`)
+            fits, added = _extend_restoring(fits, xs, vs, ys, w, library, solver, 0.0 if fill else screen_sigma, i,
+                                            failure, noise, x_noise, extend_upto, band)
         local.append((labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band, at_rest, damping_added))
         # estimated accelerations: the joint regression on low-passed rows (`row_filter`; shallow arch, x only,
         # 30 dB, 0.45 % sweeps, seeds 0-1: 8.31/8.81 % on raw rows, degree 13; 1.35/6.11 % filtered, degree 7)
@@ -1008,8 +1010,11 @@ def reconstruct(
         swing, swung = _sanity.check_swings(i, names, xcol, labels, eq, local_k)
         warnings += swing + _sanity.check_amplitude(i, names, xcol, labels, eq, skip=swung)
         well_names = [", ".join(names[k] for k in grp) for grp in groups]
-        warnings += _sanity.check_significance(i, well_names, library.names(), coef, local_se,
-                                               _under_top_order(coef, library) if screen_sigma is not None else None)
+        exempt = _under_top_order(coef, library) if screen_sigma is not None else None
+        if exempt is not None:  # orders `_extend_restoring` added are kept on purpose (`FILL_CURVATURE`: whatever t)
+            for k, orders in enumerate(added):
+                exempt[k, library.indices(STIFFNESS)[list(orders)]] = True
+        warnings += _sanity.check_significance(i, well_names, library.names(), coef, local_se, exempt)
         amps = [max(_sanity.vibration_amplitude(xcol[k]) for k in grp) for grp in groups]
         warnings += _sanity.check_global_shape(i, np.asarray(g.stiffness), eq, amps, local_k)
         n_k = g.stiffness.shape[0]
