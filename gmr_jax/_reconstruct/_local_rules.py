@@ -23,7 +23,7 @@ from .._fit._local_fit import LocalFit, fit_local, with_constant
 from .._solution import RESULTS
 
 
-def _screen(fits: LocalFit, n_sigma: float, library: Library | None = None) -> LocalFit:
+def _screen(fits: LocalFit, n_sigma: float, library: Library | None = None, exempt=None) -> LocalFit:
     """Local coefficients under `n_sigma` standard errors set to zero (and their covariance rows);
     NumPy in, NumPy out (the bookkeeping after the jitted fits dispatches no JAX operation).
 
@@ -32,10 +32,13 @@ def _screen(fits: LocalFit, n_sigma: float, library: Library | None = None) -> L
     highest order as a known zero (Eq. 18), and an unresolved q^3 under a resolved q^4 is not known
     to be zero (shallow arch, 30 dB, seed 2: the third derivative set to 0 at the second well,
     restoring error 1.33 -> 3.54 % where the correction for the noise on x moved q^3 below 3
-    standard errors). A coefficient STLS set to zero stays a known zero, as in the paper."""
+    standard errors). A coefficient STLS set to zero stays a known zero, as in the paper. `exempt`: a mask
+    (terms,) or (wells, terms) of terms kept whatever their t."""
     coef, cov = np.asarray(fits.coef), np.asarray(fits.covariance)
     se = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None))
     keep = np.abs(coef) >= n_sigma * se
+    if exempt is not None:
+        keep = keep | np.asarray(exempt, bool)
     if library is not None:
         idx = library.indices(STIFFNESS)  # q^0 .. q^r
         kept = keep[:, idx] & (coef[:, idx] != 0)
@@ -263,7 +266,7 @@ FILL_CURVATURE = True
 
 
 def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failure, noise=None, x_noise=None,
-                      upto: int | None = None, band=None):
+                      upto: int | None = None, band=None, fill: bool = False):
     """Raise each well's local restoring order while the next Taylor term is significant.
 
     STLS judges a term by its share of the local force, so a restoring q^(r+1) that the data
@@ -273,8 +276,9 @@ def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failur
     1 mm, seed 3: q^4 at t = 59 dropped, q^3 biased by +2.1 % (35 standard errors), restoring
     error 2.75 % against the exact-Taylor oracle's 1.68 %. Each well is refitted on its support plus
     q^(r+1) (at its own threshold, the support kept); the term stays if the refit resolves it,
-    and the next order is tried, up to q^`upto` (default: the library's restoring order). Returns
-    the fits and, per well, the orders added."""
+    and the next order is tried, up to q^`upto` (default: the library's restoring order). `fill`: each order up to
+    q^`upto` is added whatever its t (`FILL_CURVATURE`; the refit's other terms still screened at `n_sigma`).
+    Returns the fits and, per well, the orders added."""
     idx = library.indices(STIFFNESS)  # q^0 .. q^r, in order
     added, noise = [[] for _ in range(xs.shape[0])], noise or [None] * xs.shape[0]
     x_noise, band = x_noise or [None] * xs.shape[0], band or [None] * xs.shape[0]
@@ -289,9 +293,9 @@ def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failur
             sol = _refit_on(xs, vs, ys, w, library, solver, fits, k, mask, noise, x_noise, band)
             c = float(sol.value.coef[idx[top + 1]])
             se = float(np.sqrt(max(float(sol.value.covariance[idx[top + 1], idx[top + 1]]), 0.0)))
-            if int(sol.result._value) != int(RESULTS.successful._value) or not abs(c) >= n_sigma * se:
+            if int(sol.result._value) != int(RESULTS.successful._value) or not (fill or abs(c) >= n_sigma * se):
                 break
-            new = _screen(_as_well(sol.value), n_sigma, library)
+            new = _screen(_as_well(sol.value), n_sigma, library, exempt=(np.arange(mask.size) == idx[top + 1]) & fill)
             if float(new.coef[0, idx[top + 1]]) == 0.0:
                 break
             fits = _set_well(fits, k, new)

@@ -961,8 +961,8 @@ def reconstruct(
         added = [[] for _ in groups]
         if extend_restoring and screen_sigma is not None:
             fill = extend_upto == 2 and _local_rules.FILL_CURVATURE  # F'' whatever its t (`FILL_CURVATURE`)
-            fits, added = _extend_restoring(fits, xs, vs, ys, w, library, solver, 0.0 if fill else screen_sigma, i,
-                                            failure, noise, x_noise, extend_upto, band)
+            fits, added = _extend_restoring(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure, noise,
+                                            x_noise, extend_upto, band, fill=fill)
         local.append((labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band, at_rest, damping_added))
         # estimated accelerations: the joint regression on low-passed rows (`row_filter`; shallow arch, x only,
         # 30 dB, 0.45 % sweeps, seeds 0-1: 8.31/8.81 % on raw rows, degree 13; 1.35/6.11 % filtered, degree 7)
