@@ -9,7 +9,7 @@ values. Yet a slope the threshold dropped is not a zero slope. 5-cell Kresling c
 L/2) / (L/2))^2 halves between the wells (C' = -15 and +15 at them); the model's C was the wells'
 constant with a band 0.17 % wide, 470-690 standard errors off mid-span (coverage 4.9 %).
 
-Each such well is refitted with x v added to its support (`_local_rules._refit_on`, the other kept
+Each such well is refitted with x v added to its support (`_local_rules._refit_with`, the other kept
 terms exempt from the threshold): its coefficient c_k and standard error s_k are what the well's data
 say of C'(x_k) (tip cell: about 3 standard errors at each well). The law the coordination chose and
 the one with that slope differ by c_k H_k(x), H_k the Hermite basis polynomial of degree 2n - 1 on
@@ -25,9 +25,7 @@ the position terms and its own degree choice is in its band.
 import numpy as np
 
 from .._fit._library import POSITION_DAMPING, STIFFNESS, Library
-from .._fit._local_fit import with_constant
-from .._solution import RESULTS
-from ._local_rules import _refit_on
+from ._local_rules import _refit_with
 
 #: `unresolved_slopes` and `slope_vectors` enter the band (a module switch, for the studies' before/after and
 #: the tests' teeth)
@@ -38,7 +36,7 @@ def unresolved_slopes(fits, xs, vs, ys, w, library: Library, solver, noise=None,
                       band=None) -> tuple[np.ndarray, np.ndarray]:
     """Per well, the x v coefficient (C'(x_k)) and its standard error refitted with x v in its support, where the
     support lacks it and keeps a damping term; 0 elsewhere (x v kept, no damping, no x v in the library, a failed
-    refit). Arguments as `_local_rules._refit_on` takes them."""
+    refit). Arguments as `_local_rules._refit_with` takes them."""
     n = xs.shape[0]
     est, out = np.zeros(n), np.zeros(n)
     terms = library.terms()
@@ -47,17 +45,11 @@ def unresolved_slopes(fits, xs, vs, ys, w, library: Library, solver, noise=None,
     j = terms.index((POSITION_DAMPING, 1))
     coef = np.asarray(fits.coef)
     damping = [i for i, (phys, _) in enumerate(terms) if phys != STIFFNESS]
-    noise, x_noise, band = (a or [None] * n for a in (noise, x_noise, band))
     for k in range(n):
         if coef[k, j] != 0 or not any(coef[k, i] != 0 for i in damping):
             continue
-        mask = with_constant(coef[k] != 0, library)
-        mask[j] = True
-        sol = _refit_on(xs, vs, ys, w, library, solver, fits, k, mask, noise, x_noise, band)
-        if int(sol.result._value) != int(RESULTS.successful._value):
-            continue
-        c, var = float(np.asarray(sol.value.coef)[j]), float(np.asarray(sol.value.covariance)[j, j])
-        if np.isfinite(c) and np.isfinite(var) and var > 0:
+        _, ok, c, var = _refit_with(xs, vs, ys, w, library, solver, fits, k, coef[k], j, noise, x_noise, band)
+        if ok and np.isfinite(c) and np.isfinite(var) and var > 0:
             est[k], out[k] = c, np.sqrt(var)
     return est, out
 

@@ -211,12 +211,24 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
     return fits, sorted(set(dropped))
 
 
-def _refit_on(xs, vs, ys, w, library, solver, fits, k: int, mask, noise, x_noise, band):
+def _refit_on(xs, vs, ys, w, library, solver, fits, k: int, mask, noise=None, x_noise=None, band=None):
     """Well `k` refitted on the support `mask` (at its own threshold, every term of `mask` exempt from it):
-    the `fit_local` Solution on the host. `noise`, `x_noise`, `band`: per-well lists, as `_fit_wells` takes."""
+    the `fit_local` Solution on the host. `noise`, `x_noise`, `band`: per-well lists, as `_fit_wells` takes
+    (None: none at any well)."""
     slv = eqx.tree_at(lambda s: s.threshold, solver, fits.threshold[k])
+    at = lambda a: None if a is None else a[k]
     return jax.device_get(fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=mask, support=mask,
-                                    noise=noise[k], x_noise=x_noise[k], band=band[k], throw=False))
+                                    noise=at(noise), x_noise=at(x_noise), band=at(band), throw=False))
+
+
+def _refit_with(xs, vs, ys, w, library, solver, fits, k: int, support, j: int, noise=None, x_noise=None, band=None):
+    """Well `k` refitted on the nonzero terms of `support` (a coefficient row) plus term `j` (`_refit_on`): the
+    Solution, whether it succeeded, and term j's coefficient and variance."""
+    mask = with_constant(np.asarray(support) != 0, library)
+    mask[j] = True
+    sol = _refit_on(xs, vs, ys, w, library, solver, fits, k, mask, noise, x_noise, band)
+    ok = int(sol.result._value) == int(RESULTS.successful._value)
+    return sol, ok, float(np.asarray(sol.value.coef)[j]), float(np.asarray(sol.value.covariance)[j, j])
 
 
 #: `_one_of_a_group` runs (a module switch, for the studies' before/after and the tests' teeth)
@@ -233,21 +245,16 @@ def _one_of_a_group(fits, screened, xs, vs, ys, w, library, solver, n_sigma, dof
     as it was."""
     damping = np.array([phys != STIFFNESS for phys, _ in library.terms()])
     before, after = np.asarray(fits.coef), np.asarray(screened.coef)
-    noise, x_noise = noise or [None] * xs.shape[0], x_noise or [None] * xs.shape[0]
-    band = band or [None] * xs.shape[0]
     for k in range(before.shape[0]):
         had = np.nonzero(damping & (before[k] != 0))[0]
         if had.size == 0 or np.any(damping & (after[k] != 0)):
             continue
         best = None
         for j in had:
-            mask = with_constant(after[k] != 0, library)
-            mask[j] = True
-            sol = _refit_on(xs, vs, ys, w, library, solver, fits, k, mask, noise, x_noise, band)
-            if int(sol.result._value) != int(RESULTS.successful._value):
+            sol, ok, c, var = _refit_with(xs, vs, ys, w, library, solver, fits, k, after[k], j, noise, x_noise, band)
+            if not ok:
                 failure.note(sol.result, f"DOF {dof}, well {k}: refit with one of its damping terms")
                 continue
-            c, var = float(sol.value.coef[j]), float(sol.value.covariance[j, j])
             if var > 0 and abs(c) >= n_sigma * np.sqrt(var) and (best is None or float(sol.value.rss) < best[0]):
                 best = (float(sol.value.rss), sol.value)
         if best is not None:
@@ -280,22 +287,18 @@ def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failur
     q^`upto` is added whatever its t (`FILL_CURVATURE`; the refit's other terms still screened at `n_sigma`).
     Returns the fits and, per well, the orders added."""
     idx = library.indices(STIFFNESS)  # q^0 .. q^r, in order
-    added, noise = [[] for _ in range(xs.shape[0])], noise or [None] * xs.shape[0]
-    x_noise, band = x_noise or [None] * xs.shape[0], band or [None] * xs.shape[0]
+    added = [[] for _ in range(xs.shape[0])]
     for k in range(xs.shape[0]):
         while True:
             coef = np.asarray(fits.coef[k])
             top = max([j for j, c in enumerate(coef[idx]) if c != 0], default=0)
             if top >= (library.restoring_order if upto is None else min(upto, library.restoring_order)):
                 break
-            mask = with_constant(coef != 0, library)
-            mask[idx[top + 1]] = True
-            sol = _refit_on(xs, vs, ys, w, library, solver, fits, k, mask, noise, x_noise, band)
-            c = float(sol.value.coef[idx[top + 1]])
-            se = float(np.sqrt(max(float(sol.value.covariance[idx[top + 1], idx[top + 1]]), 0.0)))
-            if int(sol.result._value) != int(RESULTS.successful._value) or not (fill or abs(c) >= n_sigma * se):
+            sol, ok, c, var = _refit_with(xs, vs, ys, w, library, solver, fits, k, coef, idx[top + 1], noise, x_noise,
+                                          band)
+            if not ok or not (fill or abs(c) >= n_sigma * np.sqrt(max(var, 0.0))):
                 break
-            new = _screen(_as_well(sol.value), n_sigma, library, exempt=(np.arange(mask.size) == idx[top + 1]) & fill)
+            new = _screen(_as_well(sol.value), n_sigma, library, exempt=(np.arange(coef.size) == idx[top + 1]) & fill)
             if float(new.coef[0, idx[top + 1]]) == 0.0:
                 break
             fits = _set_well(fits, k, new)
@@ -325,8 +328,6 @@ def _dissipative_at_rest(fits, xs, vs, ys, w, library, solver, n_sigma, dof, fai
     coef = np.asarray(fits.coef)
     negative = coef[:, j] < 0
     wells = np.nonzero((coef[:, j] != 0) if shared and negative.any() else negative)[0]
-    noise, x_noise = noise or [None] * xs.shape[0], x_noise or [None] * xs.shape[0]
-    band = band or [None] * xs.shape[0]
     for k in wells:
         mask = with_constant(coef[k] != 0, library)
         mask[j] = False
@@ -365,21 +366,14 @@ def _extend_damping(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failure,
     Returns the fits and the orders j added."""
     terms = library.terms()
     coef0 = np.asarray(fits.coef)
-    noise, x_noise = noise or [None] * xs.shape[0], x_noise or [None] * xs.shape[0]
-    band = band or [None] * xs.shape[0]
-
     best = (_summed_bic(fits) - EXTEND_DAMPING_EVIDENCE, None, None)
     for j, (phys, order) in enumerate(terms):
         if phys != VELOCITY_DAMPING or order == 1 or np.any(coef0[:, j] != 0):
             continue
         new_fits = fits
         for k in range(coef0.shape[0]):
-            mask = with_constant(coef0[k] != 0, library)
-            mask[j] = True
-            sol = _refit_on(xs, vs, ys, w, library, solver, fits, k, mask, noise, x_noise, band)
-            c, var = float(sol.value.coef[j]), float(sol.value.covariance[j, j])
-            failed = int(sol.result._value) != int(RESULTS.successful._value)
-            if failed or not (var > 0 and c >= n_sigma * np.sqrt(var)):
+            sol, ok, c, var = _refit_with(xs, vs, ys, w, library, solver, fits, k, coef0[k], j, noise, x_noise, band)
+            if not ok or not (var > 0 and c >= n_sigma * np.sqrt(var)):
                 new_fits = None
                 break
             new = _screen(_as_well(sol.value), n_sigma, library)

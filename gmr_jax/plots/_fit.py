@@ -10,53 +10,49 @@ from .._reconstruct._reconstruct import regression_targets
 COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
 
 
-def _model_band(model, level: float = 0.95):
-    """x (n, dof) -> (lower, upper) of the `level` band of F_r from the model's covariance, the
-    same numbers as `force_band` (F_r is linear in the stiffness block, the first ones of each
-    DOF's covariance) in NumPy: no JAX program to trace for a figure; None without a covariance."""
+def _linear_band(model, columns: slice, basis, level: float):
+    """A force linear in the coefficients `columns` of each DOF's flat block (stiffness, velocity damping, position
+    damping): `basis(*args)` -> (n, dof, p) columns; returns `*args -> (lower, upper)` of its `level` band from the
+    model's covariance, the same numbers as `force_band`, in NumPy (no JAX program to trace for a figure); None
+    without a covariance."""
     cov = getattr(model, "covariance", None)
     if cov is None:
         return None
     from statistics import NormalDist
 
     z = NormalDist().inv_cdf(0.5 + level / 2)
-    k = np.asarray(model.stiffness, float)
-    c = np.asarray(cov, float)[:, : k.shape[1], : k.shape[1]]
+    blocks = (model.stiffness, model.velocity_damping, model.position_damping)
+    coef = np.concatenate([np.asarray(b, float) for b in blocks], axis=1)[:, columns]
+    c = np.asarray(cov, float)[:, columns, columns]
 
-    def band(X):
-        X = np.asarray(X, float)
-        phi = X[:, :, None] ** np.arange(k.shape[1])  # (n, dof, K+1)
-        mean = np.einsum("ndk,dk->nd", phi, k)
-        se = np.sqrt(np.maximum(np.einsum("ndj,djk,ndk->nd", phi, c, phi), 0.0))
-        return mean - z * se, mean + z * se
-
-    return band
-
-
-def _damping_band(model, level: float = 0.95):
-    """(x, v) (n, dof) each -> (lower, upper) of the `level` band of F_d from the model's covariance, as
-    `force_band(part="damping")` gives it (sgn(v)|v|^j and x^j v columns; the exact sign, not the smoothed one), in
-    NumPy; None without a covariance."""
-    cov = getattr(model, "covariance", None)
-    if cov is None:
-        return None
-    from statistics import NormalDist
-
-    z = NormalDist().inv_cdf(0.5 + level / 2)
-    ns, nv = np.asarray(model.stiffness).shape[1], np.asarray(model.velocity_damping).shape[1]
-    npd = np.asarray(model.position_damping).shape[1]
-    coef = np.concatenate([np.asarray(model.velocity_damping, float), np.asarray(model.position_damping, float)], 1)
-    c = np.asarray(cov, float)[:, ns : ns + nv + npd, ns : ns + nv + npd]
-
-    def band(X, V):
-        X, V = np.asarray(X, float), np.asarray(V, float)
-        vel = np.sign(V)[:, :, None] * np.abs(V)[:, :, None] ** np.arange(nv)
-        phi = np.concatenate([vel, X[:, :, None] ** np.arange(npd) * V[:, :, None]], axis=2)
+    def band(*args):
+        phi = basis(*(np.asarray(a, float) for a in args))
         mean = np.einsum("ndk,dk->nd", phi, coef)
         se = np.sqrt(np.maximum(np.einsum("ndj,djk,ndk->nd", phi, c, phi), 0.0))
         return mean - z * se, mean + z * se
 
     return band
+
+
+def _model_band(model, level: float = 0.95):
+    """x (n, dof) -> (lower, upper) of the `level` band of F_r (`_linear_band`; F_r is linear in the stiffness
+    block, the first ones of each DOF's covariance); None without a covariance."""
+    ns = np.asarray(model.stiffness).shape[1]
+    return _linear_band(model, slice(0, ns), lambda x: x[:, :, None] ** np.arange(ns), level)
+
+
+def _damping_band(model, level: float = 0.95):
+    """(x, v) (n, dof) each -> (lower, upper) of the `level` band of F_d (`_linear_band`; sgn(v)|v|^j and x^j v
+    columns, as `force_band(part="damping")`, with the exact sign, not the smoothed one); None without a
+    covariance."""
+    ns, nv = np.asarray(model.stiffness).shape[1], np.asarray(model.velocity_damping).shape[1]
+    npd = np.asarray(model.position_damping).shape[1]
+
+    def basis(x, v):
+        vel = np.sign(v)[:, :, None] * np.abs(v)[:, :, None] ** np.arange(nv)
+        return np.concatenate([vel, x[:, :, None] ** np.arange(npd) * v[:, :, None]], axis=2)
+
+    return _linear_band(model, slice(ns, ns + nv + npd), basis, level)
 
 
 def _dress(ax, xlabel: str, ylabel: str, title: str) -> None:
