@@ -188,7 +188,8 @@ def basin_demo(lines, n_samples=8, grid=20):
         f"Bistable joint (position-dependent damping, 1 deg, 30 dB, seed 2), Eq. 25 half-sine on the mass, "
         f"{grid} x {grid} grid f = 0.5-6 Hz, A = 500-4000 (per unit inertia), settle 5 s; "
         f"`basin_probability` with {n_samples} samples ({sol.stats['samples_used']} used, "
-        f"{sol.stats['samples_other_wells']} with other wells), {time.time() - t0:.0f} s.", "",
+        f"{sol.stats['samples_other_wells']} with other wells, {sol.stats['samples_non_dissipative']} whose damping "
+        f"feeds energy in), {time.time() - t0:.0f} s.", "",
         "| measure | value |", "|---|---|",
         f"| points where every sample agrees (probability 1) | {100 * certain.mean():.1f} % |",
         f"| median probability of the most likely configuration | {np.median(conf):.3f} |",

@@ -15,6 +15,11 @@ defaults and judged by
   widened by two spans on either side is diverged;
 - restoring error (relative L2 over the metrics box) against the curvature oracle's: the
   Hermite interpolant of each well's exact F, F', F'' (target: within 2x);
+- the noise floor: the same interpolant with each well's F, F', F''/2 drawn about the truth's
+  with the local fit's standard errors (`TermResolution.se_h`), median and 90th percentile over
+  400 draws (SciPy's `KroghInterpolator`, not the tool's): what an unbiased estimator of the
+  local Taylor data as noisy as these records allow would reach. `--floor-seeds N` checks those
+  standard errors against the scatter of the local estimates over N noise seeds;
 - whether the failures are warned (`GMRDataWarning`), and the per-well resolution table
   (`stats["resolution"]`, `gmr_jax._reconstruct._resolution`);
 - the excitation advice checked: where a needed term is unresolved, the case is re-recorded
@@ -25,6 +30,8 @@ defaults and judged by
         [--out results/stress_cases.md]
     python studies/stress_cases.py --sweep arch --out results/stress_cases_sweep.md
         # the resolution bound against the restoring error, by amplitude
+    python studies/stress_cases.py --floor-seeds 8 --cases arch_v_f32,kresling3_xa_f32 \
+        --out results/stress_cases_floor.md   # the noise floor against the seeds' scatter
 """
 
 import argparse
@@ -107,22 +114,26 @@ def recordings(case: Case, amplitude: float, seed: int, snr: float = SNR):
 # --- the curvature oracle -----------------------------------------------------------------------
 
 
-def oracle_stiffness(system, dof: int, order: int = 2) -> np.ndarray:
-    """Ascending coefficients of the Hermite interpolant of the truth's exact Taylor
-    coefficients F^(k)(x_i) / k!, k = 0..`order`, at every well of `dof` (the other cells at 0;
-    the built-in cells' restoring forces depend on their own deformation only)."""
+def truth_taylor(system, dof: int, order: int = 2) -> np.ndarray:
+    """(wells, order + 1) the truth's F^(k)(x_i) / k! at every equilibrium of `dof`."""
     d = system.truth.n_dof
 
     def f(x):
         return system.truth.restoring(jnp.zeros(d).at[dof].set(x))[dof]
 
-    nodes = np.asarray(system.equilibria[:, dof], float)
-    taylor, fk = [], f
+    out, fk = [], f
     for k in range(order + 1):
-        taylor.append([float(fk(x)) / float(np.prod(np.arange(1, k + 1))) for x in nodes])
+        out.append([float(fk(x)) / float(np.prod(np.arange(1, k + 1))) for x in np.asarray(system.equilibria[:, dof], float)])
         fk = jax.grad(fk)
-    taylor = np.array(taylor).T
-    coef, degree, _ = g.hermite_interpolate(jnp.asarray(nodes), jnp.asarray(taylor),
+    return np.array(out).T
+
+
+def oracle_stiffness(system, dof: int, order: int = 2) -> np.ndarray:
+    """Ascending coefficients of the Hermite interpolant of the truth's exact Taylor
+    coefficients F^(k)(x_i) / k!, k = 0..`order`, at every well of `dof` (the other cells at 0;
+    the built-in cells' restoring forces depend on their own deformation only)."""
+    nodes = np.asarray(system.equilibria[:, dof], float)
+    coef, degree, _ = g.hermite_interpolate(jnp.asarray(nodes), jnp.asarray(truth_taylor(system, dof, order)),
                                             jnp.full(nodes.size, order))
     return np.asarray(coef)[: int(degree) + 1]
 
@@ -133,6 +144,38 @@ def oracle_error(system, dof: int, order: int = 2) -> float:
     truth = np.asarray(jax.vmap(lambda x: system.truth.restoring(jnp.zeros(d).at[dof].set(x))[dof])(jnp.asarray(xs)))
     fit = np.polynomial.polynomial.polyval(xs, oracle_stiffness(system, dof, order))
     return float(np.linalg.norm(fit - truth) / np.linalg.norm(truth))
+
+
+def noise_floor(system, dof: int, se: np.ndarray, draws: int = 400, seed: int = 0) -> np.ndarray:
+    """Restoring errors (draws,) of the curvature oracle with each well's Taylor data F^(k)/k!
+    drawn from N(truth, se^2) (`se` (wells, 3), the local fits' standard errors): SciPy's Hermite
+    interpolant (`KroghInterpolator`, repeated nodes take F, F', F''), relative L2 over the box."""
+    from scipy.interpolate import KroghInterpolator
+
+    nodes = np.asarray(system.equilibria[:, dof], float)
+    taylor = truth_taylor(system, dof)
+    fact = np.array([1.0, 1.0, 2.0])
+    xs = np.linspace(*system.x_range[dof], 401)
+    d = system.truth.n_dof
+    truth = np.asarray(jax.vmap(lambda x: system.truth.restoring(jnp.zeros(d).at[dof].set(x))[dof])(jnp.asarray(xs)))
+    rng = np.random.default_rng(seed)
+    errs = []
+    for _ in range(draws):
+        tk = (taylor + rng.standard_normal(taylor.shape) * se) * fact  # F, F', F''
+        fit = KroghInterpolator(np.repeat(nodes, 3), tk.reshape(-1))(xs)
+        errs.append(np.linalg.norm(fit - truth) / np.linalg.norm(truth))
+    return np.array(errs)
+
+
+def local_se(res, system, dof: int) -> np.ndarray | None:
+    """(wells, 3) the local fits' standard errors of F, F', F''/2 at the truth's wells of `dof`
+    (`se_h`: the local fit's, or the hierarchical fit's where larger or the term was dropped; nearest fitted well; None where the fit found a different number of wells)."""
+    wells = [w for w in res.wells if w.dof == dof]
+    nodes = np.asarray(system.equilibria[:, dof], float)
+    if len(wells) != nodes.size:
+        return None
+    eq = np.array([w.equilibrium for w in wells])
+    return np.array([[t.se_h for t in wells[int(np.argmin(np.abs(eq - x)))].terms[:3]] for x in nodes])
 
 
 # --- criteria ---------------------------------------------------------------------------------
@@ -210,8 +253,11 @@ def evaluate(case: Case, amplitude: float, seed: int, snr: float = SNR) -> dict:
         fit_w, true_w = well_counts(model, system, i)
         err = g.metrics.restoring_error(model, system.truth, i, system.x_range[i])
         orc = oracle_error(system, i)
+        se = local_se(res, system, i)
+        floor = noise_floor(system, i, se) if se is not None else np.array([np.nan])
         row["dofs"].append({"wells": fit_w, "true_wells": true_w, "error": err, "oracle": orc,
-                            "oracle_vs": oracle_error(system, i, 1), "ratio": err / orc})
+                            "oracle_vs": oracle_error(system, i, 1), "ratio": err / orc,
+                            "floor": float(np.median(floor)), "floor90": float(np.percentile(floor, 90))})
     row["pass"] = {
         "wells": all(x["wells"] <= x["true_wells"] for x in row["dofs"]),
         "divergence": div["free"] == 0 and div["forced"] == 0,
@@ -256,11 +302,12 @@ def describe(row: dict, header: str) -> list[str]:
            f"Base amplitude {row['amplitude']:.3g}, {row['snr']:.3g} dB; amplitude ratios per well "
            f"{', '.join(f'{100 * r:.2g} %' for r in row['ratios'])}; coordination {', '.join(map(str, row['routes']))}; "
            f"{row['secs']:.0f} s; result {row['result']}.", "",
-           "| DOF | wells fitted / true | restoring error | curvature oracle | ratio (target <= 2) | value+slope oracle |",
-           "|---|---|---|---|---|---|"]
+           "| DOF | wells fitted / true | restoring error | curvature oracle | ratio (target <= 2) | value+slope oracle "
+           "| noise floor (median / 90 %) |",
+           "|---|---|---|---|---|---|---|"]
     for i, x in enumerate(row["dofs"]):
         out.append(f"| {i} | {x['wells']} / {x['true_wells']} | {_pct(x['error'])} | {_pct(x['oracle'])} | "
-                   f"{x['ratio']:.2f} | {_pct(x['oracle_vs'])} |")
+                   f"{x['ratio']:.2f} | {_pct(x['oracle_vs'])} | {_pct(x['floor'])} / {_pct(x['floor90'])} |")
     out += ["", f"Divergence: {div['free']} of {div['n_free']} free runs, {div['forced']} of {div['n_forced']} runs "
             f"under the training sweep. Criteria: spurious wells {'pass' if p['wells'] else 'FAIL'}, divergence "
             f"{'pass' if p['divergence'] else 'FAIL'}, error within 2x of the oracle {'pass' if p['error'] else 'FAIL'}; "
@@ -315,11 +362,67 @@ def sweep(system_name: str, seeds: int) -> list[str]:
     return lines
 
 
+def floor_check(case: Case, seeds: int) -> list[str]:
+    """The noise floor's standard errors against the scatter of the local F''/2 over `seeds` noise
+    seeds, and the defaults' restoring error over those seeds against the floor."""
+    system = case.make_system()
+    amp = base_amplitude(system, case.ratio)
+    d = system.truth.n_dof
+    coefs, ses, errs = [], [], []  # per seed: (dof, wells) F''/2, (dof, wells, 3) se_h, (dof,) errors
+    for seed in range(seeds):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sol = g.reconstruct(recordings(case, amp, seed), throw=False)
+        res = sol.stats["resolution"]
+        ses.append([local_se(res, system, i) for i in range(d)])
+        coefs.append([[[w for w in res.wells if w.dof == i][int(np.argmin([abs(w.equilibrium - x) for w in res.wells
+                                                                          if w.dof == i]))].terms[2].coef
+                        for x in np.asarray(system.equilibria[:, i], float)] for i in range(d)])
+        errs.append([g.metrics.restoring_error(sol.value, system.truth, i, system.x_range[i]) for i in range(d)])
+        print(case.name, seed, errs[-1], flush=True)
+    coefs, ses, errs = np.array(coefs), np.array(ses), np.array(errs)
+    rms_se = np.sqrt(np.mean(ses**2, axis=0))  # (dof, wells, 3)
+    lines = [f"## {case.name}: {seeds} noise seeds", "",
+             f"Base amplitude {amp:.3g}, {SNR:g} dB, `gmr.reconstruct` defaults on each seed.", "",
+             "| DOF | well x | truth F''/2 | mean estimate | scatter (sd over seeds) | RMS standard error (`se_h`) "
+             "| dropped |", "|---|---|---|---|---|---|---|"]
+    for i in range(d):
+        taylor = truth_taylor(system, i)
+        for k, x in enumerate(np.asarray(system.equilibria[:, i], float)):
+            cs = coefs[:, i, k]
+            lines.append(f"| {i} | {x:.4g} | {taylor[k, 2]:.4g} | {cs.mean():.4g} | {cs.std(ddof=1):.3g} | "
+                         f"{rms_se[i, k, 2]:.3g} | {int(np.sum(cs == 0))} |")
+    lines += ["", "| DOF | curvature oracle | noise floor (median / 90 %, RMS standard errors) | restoring error "
+              "(median / max over seeds) | per seed |", "|---|---|---|---|---|"]
+    for i in range(d):
+        floor = noise_floor(system, i, rms_se[i])
+        lines.append(f"| {i} | {_pct(oracle_error(system, i))} | {_pct(np.median(floor))} / "
+                     f"{_pct(np.percentile(floor, 90))} | {_pct(np.median(errs[:, i]))} / {_pct(errs[:, i].max())} | "
+                     f"{', '.join(f'{100 * e:.3g}' for e in errs[:, i])} % |")
+    # cells of one design (the truth's Taylor data proportional): an estimator that pools them
+    # (inverse-variance mean of the relative Taylor data) has a lower floor
+    taylors = np.array([truth_taylor(system, i) for i in range(d)])  # (dof, wells, 3)
+    scale = taylors[:, :1, 1:2]  # each cell's F' at its first well
+    rel = taylors / scale
+    if d > 1 and np.allclose(rel, rel[:1], rtol=1e-6, atol=1e-12):
+        rel_se = rms_se / np.abs(scale)
+        with np.errstate(divide="ignore"):
+            pooled = np.where(np.all(rel_se > 0, axis=0), 1.0 / np.sqrt(np.sum(1.0 / np.where(rel_se > 0, rel_se, np.inf) ** 2,
+                                                                              axis=0)), 0.0)
+        floor = noise_floor(system, 0, pooled * np.abs(scale[0]))
+        lines += ["", f"The {d} cells are one design (the truth's Taylor data proportional): pooled (inverse-variance "
+                  f"mean of each well's relative F, F', F''/2 over the cells), the noise floor is {_pct(np.median(floor))} "
+                  f"(median) / {_pct(np.percentile(floor, 90))} (90 %), against the defaults' median "
+                  f"{_pct(np.median(errs))} over seeds and cells."]
+    return lines + [""]
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", default=",".join(CASES))
     ap.add_argument("--seeds", type=int, default=1)
     ap.add_argument("--sweep", default=None, help="bound calibration on this system (arch, magnet) instead")
+    ap.add_argument("--floor-seeds", type=int, default=0, help="the noise floor against this many seeds' scatter instead")
     ap.add_argument("--no-advice-check", action="store_true")
     ap.add_argument("--no-nominal", action="store_true", help="skip the nominal kresling5 resolution table")
     ap.add_argument("--out", default="results/stress_cases.md")
@@ -329,6 +432,17 @@ def main():
         lines = sweep(args.sweep, args.seeds)
         lines.insert(1, f"\n`python studies/stress_cases.py --sweep {args.sweep} --seeds {args.seeds} --out {args.out}` "
                         f"({(time.time() - t0) / 60:.1f} min).")
+        with open(args.out, "w") as fh:
+            fh.write("\n".join(lines) + "\n")
+        print("\n".join(lines))
+        return
+    if args.floor_seeds:
+        t0 = time.time()
+        lines = [f"# Stress cases: the noise floor against {args.floor_seeds} noise seeds", ""]
+        for name in args.cases.split(","):
+            lines += floor_check(CASES[name], args.floor_seeds)
+        lines.insert(1, f"\n`python studies/stress_cases.py --floor-seeds {args.floor_seeds} --cases {args.cases} "
+                        f"--out {args.out}` ({(time.time() - t0) / 60:.1f} min on the shared 2-core dev machine).")
         with open(args.out, "w") as fh:
             fh.write("\n".join(lines) + "\n")
         print("\n".join(lines))
@@ -363,7 +477,7 @@ def write(args, summary, body, secs):
              + f"` ({secs / 60:.1f} min on the shared 2-core dev machine).", "",
              __doc__.split("\n\n    python")[0].split("\n\n", 1)[1], "",
              "| case | seed | amplitude ratios | spurious wells | diverged (free / forced) | restoring error / oracle "
-             "(per DOF) | within 2x | warned | resolution: needed and unresolved | at the advised amplitude "
+             "(noise floor, median; per DOF) | within 2x | warned | resolution: needed and unresolved | at the advised amplitude "
              "| at the advised SNR (same amplitude) |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
 
@@ -383,7 +497,7 @@ def write(args, summary, body, secs):
             continue
         div = row["divergence"]
         spur = sum(max(0, x["wells"] - x["true_wells"]) for x in row["dofs"])
-        errs = ", ".join(f"{_pct(x['error'])} / {_pct(x['oracle'])}" for x in row["dofs"])
+        errs = ", ".join(f"{_pct(x['error'])} / {_pct(x['oracle'])} (floor {_pct(x['floor'])})" for x in row["dofs"])
         miss = "; ".join(f"DOF {w.dof} x={w.equilibrium:.3g}: {t.name}"
                          for w, t in row["resolution"].missing()) or "-"
         adv = (checked(row, after, f"x{after['amplitude'] / row['amplitude']:.2g} base amplitude") if after else

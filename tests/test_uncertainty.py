@@ -201,12 +201,32 @@ def test_discrepancy_widens_between_wells_and_covers_a_non_polynomial_truth():
     assert np.mean(err <= 1.96 * se + 1e-12) >= 0.9
 
 
-def _bistable(var_k1):
+def _bistable(var_k1, var_c=1e-4, position=None):
     terms = [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -30.0},
              {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 1e5},
              {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.5}]
-    cov = [{"dof": 0, "terms": [["stiffness", 1], ["velocity_damping", 1]], "matrix": [[var_k1, 0.0], [0.0, 1e-4]]}]
+    if position is not None:  # x^k v terms
+        terms += [{"dof": 0, "physics": "position_damping", "order": k, "coefficient": c} for k, c in position.items()]
+    cov = [{"dof": 0, "terms": [["stiffness", 1], ["velocity_damping", 1]], "matrix": [[var_k1, 0.0], [0.0, var_c]]}]
     return g.from_terms([0.05], terms, covariance=cov)
+
+
+def test_feeds_energy_reads_the_damping_over_the_span_of_use():
+    from gmr_jax._basins._probability import feeds_energy
+
+    x_range = [[-0.05, 0.05]]
+    m = _bistable(1e-6)
+    wells = g.stable_wells(m, x_range)
+    assert feeds_energy(m, wells, x_range) == []
+    # wells at +-0.0173: 0.5 - 20 x^2 v stays positive on the span widened by half (|x| <= 0.035)
+    assert feeds_energy(_bistable(1e-6, position={2: -20.0}), wells, x_range) == []
+    # ... 0.5 - 1000 x^2 turns negative at |x| > 0.022, inside it
+    why = feeds_energy(_bistable(1e-6, position={2: -1000.0}), wells, x_range)
+    assert len(why) == 1 and why[0].startswith("DOF 0: its damping feeds energy in")
+    neg = g.from_terms([0.05], [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -30.0},
+                                {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 1e5},
+                                {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": -0.1}])
+    assert feeds_energy(neg, wells, x_range) != []
 
 
 def test_basin_probability_on_a_tiny_grid():
@@ -223,14 +243,27 @@ def test_basin_probability_on_a_tiny_grid():
     np.testing.assert_allclose(bp.confidence, 1.0)
     np.testing.assert_allclose(np.sum(np.asarray(bp.probability), axis=-1), 1.0)
     assert sol.stats["samples_used"] == 3 and sol.stats["samples_other_wells"] == 0
-    # a wide one: samples whose k1 turns positive have one well and are counted apart; the rest
-    # give probabilities that sum to 1 per point
+    # a wide one: samples whose k1 turns positive have one well and are counted apart (more are
+    # drawn in their place); the rest give probabilities that sum to 1 per point
     wide = _bistable(30.0**2)
     sol = g.basin_probability(wide, f, A, jax.random.key(1), 6, x_range=x_range, settings=settings)
-    assert sol.stats["samples_used"] + sol.stats["samples_other_wells"] == 6
-    assert sol.stats["samples_other_wells"] >= 1
+    assert sol.stats["samples_used"] + sol.stats["samples_other_wells"] == sol.stats["samples_drawn"]
+    assert sol.stats["samples_other_wells"] >= 1 and sol.stats["samples_non_dissipative"] == 0
     if sol.stats["samples_used"]:
         np.testing.assert_allclose(np.sum(np.asarray(sol.value.probability), axis=-1), 1.0)
+    # a damping whose distribution reaches below 0 (c = 0.5 +- 0.5): those samples feed energy in and
+    # are left out, counted apart, and more are drawn until n are used; every sample used dissipates
+    leaky = _bistable(1e-6, var_c=0.25)
+    sol = g.basin_probability(leaky, f, A, jax.random.key(2), 6, x_range=x_range, settings=settings)
+    st = sol.stats
+    assert st["samples_used"] == 6 and st["samples_other_wells"] == 0 and st["mean_non_dissipative"] == []
+    draws = np.concatenate([np.asarray(g.sample_models(leaky, k, 6).velocity_damping)[:, 0, 1]
+                            for k in (jax.random.key(2), jax.random.fold_in(jax.random.key(2), 1))])
+    drawn = st["samples_drawn"]
+    assert drawn > 6 and st["samples_non_dissipative"] == int(np.sum(draws[:drawn] < 0)) == drawn - 6
+    # ... and no more than `max_draws`
+    sol = g.basin_probability(leaky, f, A, jax.random.key(2), 6, x_range=x_range, settings=settings, max_draws=6)
+    assert sol.stats["samples_drawn"] == 6 and sol.stats["samples_used"] == 6 - int(np.sum(draws[:6] < 0)) < 6
     with pytest.raises(g.GMRInputError, match="no covariance"):
         g.basin_probability(g.from_terms([1.0], [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": 1.0}]),
                             f, A, jax.random.key(0), 2, x_range=x_range)

@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int, PRNGKeyArray
 
+from .._coordination._joint import damping_faults
 from .._errors import GMRInputError
 from .._model._model import GlobalModel
 from .._model._uncertainty import sample_models
@@ -33,6 +34,31 @@ class BasinProbability(eqx.Module):
     mean_config: Int[Array, "na nf"]
 
 
+def feeds_energy(model: GlobalModel, wells: np.ndarray, x_range) -> list[str]:
+    """Why `model`'s damping is not dissipative where its basin map is read, or [] (`damping_faults`
+    per DOF: D(x, v) v >= 0 over the span of the DOF's wells widened by half of it, or `x_range` with
+    one well, and |v| up to the speed of a fall from anywhere in `x_range` to its lowest-lying well,
+    sqrt(2 max(V - V_well) / m), V = ∫ F dx)."""
+    x_range = np.broadcast_to(np.asarray(x_range, float), (model.n_dof, 2))
+    out = []
+    for i in range(model.n_dof):
+        w = np.asarray(wells[i], float)
+        w = w[np.isfinite(w)]
+        if w.size == 0:
+            continue
+        xs = np.linspace(*x_range[i], 401)
+        antider = np.polynomial.polynomial.polyint(np.asarray(model.stiffness[i], float))
+        drop = float(np.max(np.polynomial.polynomial.polyval(xs, antider))
+                     - np.min(np.polynomial.polynomial.polyval(w, antider)))
+        speed = float(np.sqrt(2.0 * max(drop, 0.0) / float(model.masses[i])))
+        if not speed > 0:
+            continue
+        span = w if w.size > 1 else x_range[i]
+        out += [f"DOF {i}: {why}" for why in damping_faults(np.asarray(model.velocity_damping[i]),
+                                                             np.asarray(model.position_damping[i]), span, speed)]
+    return out
+
+
 def basin_probability(
     model: GlobalModel,
     f: Float[ArrayLike, " nf"],
@@ -45,6 +71,7 @@ def basin_probability(
     settings: SweepSettings = SweepSettings(),
     chunk: int | None = None,
     progress: Callable[[int, int], None] | None = None,
+    max_draws: int | None = None,
 ) -> Solution:
     """Basin map (`basin_map`, Eq. 25 load) propagated through the model's uncertainty: `n`
     models drawn from N(coefficients, `GlobalModel.covariance`) (`sample_models`), each swept
@@ -56,48 +83,69 @@ def basin_probability(
     - `model`: a `GlobalModel` with a covariance (from `reconstruct`).
     - `f`, `A`, `x0`, `settings`, `chunk`: as `basin_map` (every sample is swept with the same
       compiled function: coefficients are traced, so the n sweeps compile once).
-    - `key`, `n`: the `jax.random` key and number of samples.
+    - `key`, `n`: the `jax.random` key and the number of samples the probabilities average over.
     - `x_range`: (lo, hi) or (dof, 2), the interval of each DOF in which each sample's stable
       wells are searched (`stable_wells`), e.g. the span of the training data.
-    - `progress`: optional `progress(done, n)` after each sample.
+    - `progress`: optional `progress(done, n)` after each sample swept.
+    - `max_draws`: at most this many draws (default 8 n) to find the n samples.
 
     **Returns:** a `Solution` whose `value` is a `BasinProbability`. A sample whose number of
     stable wells in `x_range` differs from the model's (the distribution puts weight on a
     different landscape) cannot be read in the model's configurations: it is left out of the
-    probabilities and counted in `stats["samples_other_wells"]`; `stats["samples_used"]` is the
-    number the probabilities average over (`result` is `RESULTS.nonfinite` when none is).
+    probabilities and counted in `stats["samples_other_wells"]`. A sample whose damping feeds
+    energy in where the map is read (`feeds_energy`: the tail of the distribution past
+    D(x, v) v = 0, a structure that is not passive) is left out and counted in
+    `stats["samples_non_dissipative"]` (the model's own faults, if any, in
+    `stats["mean_non_dissipative"]`): the probabilities are those of the distribution restricted
+    to passive structures with the model's landscape. Draws go on until n samples are used or
+    `max_draws` were drawn (`stats["samples_drawn"]`); `stats["samples_used"]` is the number the
+    probabilities average over (`result` is `RESULTS.nonfinite` when none is).
     A point where a sample failed or did not settle counts for configuration -1 (each sweep
     runs with `throw=False`; `stats["counts"]` sums the sweeps' codes).
     """
     n = int(n)
     if n < 1:
         raise GMRInputError(f"basin_probability: n must be >= 1, got {n}")
-    samples = sample_models(model, key, n)  # refuses a model without a covariance first
+    max_draws = 8 * n if max_draws is None else int(max_draws)
+    first = sample_models(model, key, min(n, max(max_draws, 1)))  # refuses a model without a covariance first
     wells0 = stable_wells(model, x_range)
     mean_map = basin_map(model, f, A, wells0, x0=x0, settings=settings, chunk=chunk, throw=False)
     n_wells = np.sum(np.isfinite(wells0), axis=1)
-    configs, used, other, counts = [], 0, 0, {}
-    for k in range(n):
-        m = jax.tree.map(lambda a, k=k: a[k] if eqx.is_array(a) else a, samples)
-        w = stable_wells(m, x_range)
-        if w.shape != wells0.shape or np.any(np.sum(np.isfinite(w), axis=1) != n_wells):
-            other += 1
-        else:
+    configs, drawn, other, passive, counts = [], 0, 0, 0, {}
+    batch = 0
+    while len(configs) < n and drawn < max_draws:
+        # the first n draws are `sample_models(model, key, n)`; more batches, where some were left out
+        size = min(n, max_draws - drawn)
+        samples = first if batch == 0 else sample_models(model, jax.random.fold_in(key, batch), size)
+        batch += 1
+        for k in range(size):
+            if len(configs) == n:
+                break
+            drawn += 1
+            m = jax.tree.map(lambda a, k=k: a[k] if eqx.is_array(a) else a, samples)
+            w = stable_wells(m, x_range)
+            if w.shape != wells0.shape or np.any(np.sum(np.isfinite(w), axis=1) != n_wells):
+                other += 1
+                continue
+            if feeds_energy(m, w, x_range):
+                passive += 1
+                continue
             sol = basin_map(m, f, A, w, x0=x0, settings=settings, chunk=chunk, throw=False)
             configs.append(np.asarray(sol.value.config))
-            used += 1
             for name, c in sol.stats["counts"].items():
                 counts[name] = counts.get(name, 0) + c
-        if progress is not None:
-            progress(k + 1, n)
+            if progress is not None:
+                progress(len(configs), n)
+    used = len(configs)
     bm0 = mean_map.value
+    stats = {"samples_used": used, "samples_drawn": drawn, "samples_other_wells": other, "samples_non_dissipative": passive,
+             "mean_non_dissipative": feeds_energy(model, wells0, x_range), "counts": counts}
     if not configs:
         shape = np.asarray(bm0.config).shape
         value = BasinProbability(f=bm0.f, A=bm0.A, configs=jnp.zeros(0, int), probability=jnp.zeros(shape + (0,)),
                                  most_likely=jnp.full(shape, -1), confidence=jnp.zeros(shape),
                                  mean_config=bm0.config)
-        return Solution(value=value, result=RESULTS.nonfinite,
-                        stats={"samples_used": 0, "samples_other_wells": other, "counts": counts})
+        return Solution(value=value, result=RESULTS.nonfinite, stats=dict(stats, samples_used=0))
     stack = np.stack(configs)  # (used, NA, NF)
     values = np.unique(stack)
     prob = np.stack([np.mean(stack == c, axis=0) for c in values], axis=-1)
@@ -105,5 +153,4 @@ def basin_probability(
     value = BasinProbability(f=bm0.f, A=bm0.A, configs=jnp.asarray(values),
                              probability=jnp.asarray(prob), most_likely=jnp.asarray(values[best]),
                              confidence=jnp.asarray(np.max(prob, axis=-1)), mean_config=bm0.config)
-    return Solution(value=value, result=RESULTS.successful,
-                    stats={"samples_used": used, "samples_other_wells": other, "counts": counts})
+    return Solution(value=value, result=RESULTS.successful, stats=stats)
