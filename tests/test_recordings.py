@@ -165,14 +165,70 @@ def test_lab_files_with_a_column_mapping(tmp_path):
         g.load_recording(tmp_path / "run.mat", {"x": "qm", "forcing": "vir"})
     with pytest.raises(g.GMRInputError, match="single number for 'force'"):
         g.load_recording(tmp_path / "run.mat", {"x": "qm", "force": "gtau"})
-    # a MATLAB v7.3 file (HDF5 behind a 128-byte header with version 0x0200): named, with the fix
+    # a v7.3 header on a file that is not HDF5: named
     header = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Mon Nov 23 2026 HDF5 schema 1.00 .".ljust(116)
     (tmp_path / "v73.mat").write_bytes(header + b" " * 8 + b"\x00\x02" + b"IM" + b"\x89HDF\r\n\x1a\n" + b"\0" * 512)
-    with pytest.raises(g.GMRInputError, match=r"MATLAB v7.3 \(HDF5\) file, which is not read; save it with"):
+    with pytest.raises(g.GMRInputError, match=r"cannot read as a MATLAB v7.3 \(HDF5\) file"):
         g.load_recording(tmp_path / "v73.mat", {"x": "qm"})
     (tmp_path / "junk.mat").write_bytes(b"MATLAB 5.0 junk" * 20)
     with pytest.raises(g.GMRInputError, match="cannot read as a MATLAB .mat file"):
         g.load_recording(tmp_path / "junk.mat")
+
+
+def _write_mat73(path, variables: dict):
+    """A file as MATLAB's save(..., '-v7.3') writes it: a 512-byte user block whose first 128 bytes
+    are the MAT header (version 0x0200), then HDF5; each variable transposed, with its MATLAB_class."""
+    h5py = pytest.importorskip("h5py")
+    with h5py.File(path, "w", userblock_size=512) as fh:
+        for k, v in variables.items():
+            if isinstance(v, str):
+                d = fh.create_dataset(k, data=np.frombuffer(v.encode("utf-16-le"), np.uint16)[None, :].T)
+                d.attrs["MATLAB_class"] = np.bytes_("char")
+                continue
+            v = np.asarray(v)
+            v = v.reshape(-1, 1) if v.ndim == 1 else np.atleast_2d(v)
+            d = fh.create_dataset(k, data=v.T)
+            d.attrs["MATLAB_class"] = np.bytes_({"f": "double", "i": "int32", "u": "uint8", "b": "logical"}[v.dtype.kind])
+        fh.create_group("#refs#")
+        fh.create_group("meta")  # a struct
+    header = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Thu Nov 26 2026 HDF5 schema 1.00 .".ljust(116)
+    with open(path, "r+b") as fh:
+        fh.write(header + b"\0" * 8 + b"\x00\x02" + b"IM")
+
+
+def test_matlab_v73_files_read_as_the_older_formats(tmp_path, monkeypatch):
+    import scipy.io
+
+    rng = np.random.default_rng(0)
+    t = np.arange(500) / 100.0
+    qm, vir = rng.standard_normal(500), rng.standard_normal(500)
+    variables = {"t": t, "qm": qm, "vir": vir, "gtau": 35.15, "two": np.stack([qm, 2 * qm], 1), "label": "run 1",
+                 "mask": qm > 0}
+    _write_mat73(tmp_path / "run73.mat", variables)
+    scipy.io.savemat(tmp_path / "run5.mat", {k: v for k, v in variables.items()})
+    cols = {"t": "t", "x": "qm", "force": "gtau*vir"}
+    new, old = g.load_recording(tmp_path / "run73.mat", cols), g.load_recording(tmp_path / "run5.mat", cols)
+    for f in ("t", "x", "force"):
+        np.testing.assert_array_equal(getattr(new, f), getattr(old, f))
+    from gmr_jax._recordings._mapping import read_mat
+
+    got = read_mat(tmp_path / "run73.mat", "run73.mat")
+    assert sorted(got) == ["gtau", "qm", "t", "two", "vir"]  # no text, logical, struct or #refs#
+    np.testing.assert_array_equal(got["two"], variables["two"])  # (N, 2) as MATLAB holds it
+    assert got["qm"].shape == (500, 1) and got["gtau"].shape == (1, 1)
+    # without h5py: named, with the fixes
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_h5py(name, *a, **k):
+        if name == "h5py":
+            raise ImportError("no h5py")
+        return real_import(name, *a, **k)
+
+    monkeypatch.setattr(builtins, "__import__", no_h5py)
+    with pytest.raises(g.GMRInputError, match=r"v7.3 \(HDF5\) file; reading it needs h5py"):
+        g.load_recording(tmp_path / "run73.mat", cols)
 
 
 def test_cli_columns_option():

@@ -22,15 +22,14 @@ def squeeze(v) -> np.ndarray:
 
 
 def read_mat(path: Path, src: str) -> dict:
-    """Every numeric variable of a MATLAB v4-v7.2 file (scipy.io); v7.3 (HDF5) files make
-    scipy raise NotImplementedError, named here."""
+    """Every numeric variable of a MATLAB file: v4-v7.2 by scipy.io, v7.3 (HDF5, which scipy
+    refuses) by h5py where it is installed (`read_mat73`)."""
     import scipy.io
 
     try:
         raw = scipy.io.loadmat(path, squeeze_me=False)
-    except NotImplementedError:
-        raise GMRInputError(f"{src}: a MATLAB v7.3 (HDF5) file, which is not read; save it with "
-                            f"save(..., '-v7') or export the channels to .npz/.csv") from None
+    except NotImplementedError:  # scipy's answer to a v7.3 header
+        return read_mat73(path, src)
     except Exception as e:  # noqa: BLE001 - any unreadable file is a user error here
         raise GMRInputError(f"{src}: cannot read as a MATLAB .mat file ({type(e).__name__}: {e})") from None
     out = {}
@@ -38,6 +37,36 @@ def read_mat(path: Path, src: str) -> dict:
         if k.startswith("__") or not isinstance(v, np.ndarray) or v.dtype.kind not in "fiu":
             continue
         out[k] = v
+    return out
+
+
+def read_mat73(path: Path, src: str) -> dict:
+    """Every numeric variable of a MATLAB v7.3 file: an HDF5 file behind a 512-byte user block.
+    Each top-level dataset whose MATLAB_class is numeric, transposed (MATLAB stores column-major,
+    so h5py sees the dimensions reversed: an N x 1 column arrives (1, N)); structs, cells (groups
+    and `#refs#`), text, logicals, complex and empty values are left out, as scipy.io leaves them
+    for the older formats."""
+    try:
+        import h5py
+    except ImportError:
+        raise GMRInputError(f"{src}: a MATLAB v7.3 (HDF5) file; reading it needs h5py (`pip install h5py`, or the "
+                            f"package's `mat73` extra), or save it with save(..., '-v7') or export the channels to "
+                            f".npz/.csv") from None
+    out = {}
+    try:
+        with h5py.File(path, "r") as fh:
+            for k, d in fh.items():
+                if k.startswith("#") or not isinstance(d, h5py.Dataset):
+                    continue
+                cls = d.attrs.get("MATLAB_class", b"double")
+                cls = cls.decode() if isinstance(cls, bytes) else str(cls)
+                if cls in ("char", "logical", "cell", "struct", "function_handle") or d.attrs.get("MATLAB_empty", 0):
+                    continue
+                if d.dtype.kind not in "fiu":  # complex is a compound (real, imag)
+                    continue
+                out[k] = np.asarray(d[()]).T
+    except OSError as e:
+        raise GMRInputError(f"{src}: cannot read as a MATLAB v7.3 (HDF5) file ({e})") from None
     return out
 
 
