@@ -366,15 +366,15 @@ def sweep(system_name: str, seeds: int) -> list[str]:
 
 
 def slow_content(case: Case, seeds: int) -> list[str]:
-    """What a velocity sensor cannot carry: the same records with x measured, as recorded and
-    with their content below the cut-off v's integration would use removed (`_integrate`:
-    the static offset and its drift as the sweep passes each resonance, F''s signature at
-    small vibrations), each reconstructed with the defaults."""
+    """Is it what a velocity sensor cannot carry? The same records with x measured, as recorded
+    and with their content below the cut-off v's integration would use removed (`_integrate`:
+    the static offset and its drift as the sweep passes each resonance, a signature of F'' at
+    small vibrations), each reconstructed with the defaults, beside the velocity-only case."""
     from gmr_jax._recordings._integrate import highpass_cutoff, remove_drift
 
     system = case.make_system()
     amp = base_amplitude(system, case.ratio)
-    lines = [f"### {case.name}: the slow content a velocity sensor cannot carry", "",
+    lines = [f"### {case.name}: is it the slow content a velocity sensor cannot carry?", "",
              "The same sweeps with x measured instead (displacement only, 30 dB), as recorded and high-passed at "
              "the cut-off the velocity-only integration uses (cosine transform, `_integrate.remove_drift`), "
              "each with `gmr.reconstruct` defaults.", "",
