@@ -370,7 +370,12 @@ def slow_content(case: Case, seeds: int) -> list[str]:
     and with their content below the cut-off v's integration would use removed (`_integrate`:
     the static offset and its drift as the sweep passes each resonance, a signature of F'' at
     small vibrations), each reconstructed with the defaults, beside the velocity-only case."""
-    from gmr_jax._recordings._integrate import highpass_cutoff, remove_drift
+    from scipy.fft import dct, idct
+
+    def remove_drift(y, dt, f_hp):  # as `_integrate.remove_drift`: cosine-transform content below f_hp zeroed
+        c = dct(y, type=2, norm="ortho", axis=0)
+        c[np.arange(c.shape[0]) / (2.0 * c.shape[0] * dt) < f_hp] = 0.0
+        return idct(c, type=2, norm="ortho", axis=0)
 
     system = case.make_system()
     amp = base_amplitude(system, case.ratio)
@@ -384,7 +389,8 @@ def slow_content(case: Case, seeds: int) -> list[str]:
         recs_x, recs_hp, cuts = [], [], []
         for k, r in enumerate(raw):
             dt = float(r.t[1] - r.t[0])
-            cut = highpass_cutoff(r.v[:, 0], dt, 1)
+            cut = float(g.Recording(t=r.t, v=r.v, equilibrium=np.asarray(system.equilibria[k], float)).integration[
+                "f_highpass_hz"][0])  # the cut-off the velocity-only recording integrates with
             x = remove_drift(r.x - r.x.mean(axis=0), dt, cut) + np.asarray(system.equilibria[k], float)
             common = {"t": r.t, "base_acc": r.base_acc, "masses": r.masses, "name": r.name}
             recs_x.append(g.Recording(x=r.x, **common))
