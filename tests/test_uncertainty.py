@@ -223,6 +223,14 @@ def test_feeds_energy_reads_the_damping_over_the_span_of_use():
     # ... 0.5 - 1000 x^2 turns negative at |x| > 0.022, inside it
     why = feeds_energy(_bistable(1e-6, position={2: -1000.0}), wells, x_range)
     assert len(why) == 1 and why[0].startswith("DOF 0: its damping feeds energy in")
+    # the speed: a fall from the edge of x_range to a well, sqrt(2 (V(0.05) - V(well)) / m) = 2.2; a cubic
+    # damping 0.5 v + b3 v^3 turns at |v| = sqrt(0.5 / -b3): inside at b3 = -0.12, beyond at -0.09
+    cubic = [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -30.0},
+             {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 1e5},
+             {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.5}]
+    for b3, feeds in ((-0.09, False), (-0.12, True)):
+        m3 = g.from_terms([0.05], cubic + [{"dof": 0, "physics": "velocity_damping", "order": 3, "coefficient": b3}])
+        assert bool(feeds_energy(m3, wells, x_range)) is feeds
     neg = g.from_terms([0.05], [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -30.0},
                                 {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 1e5},
                                 {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": -0.1}])
@@ -251,19 +259,30 @@ def test_basin_probability_on_a_tiny_grid():
     assert sol.stats["samples_other_wells"] >= 1 and sol.stats["samples_non_dissipative"] == 0
     if sol.stats["samples_used"]:
         np.testing.assert_allclose(np.sum(np.asarray(sol.value.probability), axis=-1), 1.0)
-    # a damping whose distribution reaches below 0 (c = 0.5 +- 0.5): those samples feed energy in and
-    # are left out, counted apart, and more are drawn until n are used; every sample used dissipates
-    leaky = _bistable(1e-6, var_c=0.25)
-    sol = g.basin_probability(leaky, f, A, jax.random.key(2), 6, x_range=x_range, settings=settings)
+    # a damping whose distribution reaches below 0 (c = 0.5 +- 1): those samples feed energy in and
+    # are left out, counted apart, and more are drawn until n are used; every sample used dissipates.
+    # The key: the first whose 6 draws hold a negative c (the test's teeth, whatever the random stream)
+    leaky = _bistable(1e-6, var_c=1.0)
+
+    def draws(key, batches):
+        return np.concatenate([np.asarray(g.sample_models(leaky, key if b == 0 else jax.random.fold_in(key, b), 6)
+                                          .velocity_damping)[:, 0, 1] for b in range(batches)])
+
+    key = next(k for k in (jax.random.key(i) for i in range(50)) if np.any(draws(k, 1) < 0))
+    c = draws(key, 8)
+    seen = []
+    sol = g.basin_probability(leaky, f, A, key, 6, x_range=x_range, settings=settings,
+                              progress=lambda used, n: seen.append(used))
     st = sol.stats
     assert st["samples_used"] == 6 and st["samples_other_wells"] == 0 and st["mean_non_dissipative"] == []
-    draws = np.concatenate([np.asarray(g.sample_models(leaky, k, 6).velocity_damping)[:, 0, 1]
-                            for k in (jax.random.key(2), jax.random.fold_in(jax.random.key(2), 1))])
     drawn = st["samples_drawn"]
-    assert drawn > 6 and st["samples_non_dissipative"] == int(np.sum(draws[:drawn] < 0)) == drawn - 6
+    assert drawn > 6 and st["samples_non_dissipative"] == int(np.sum(c[:drawn] < 0)) == drawn - 6
+    assert len(seen) == drawn and seen[-1] == 6  # progress after every draw, the used count
     # ... and no more than `max_draws`
-    sol = g.basin_probability(leaky, f, A, jax.random.key(2), 6, x_range=x_range, settings=settings, max_draws=6)
-    assert sol.stats["samples_drawn"] == 6 and sol.stats["samples_used"] == 6 - int(np.sum(draws[:6] < 0)) < 6
+    sol = g.basin_probability(leaky, f, A, key, 6, x_range=x_range, settings=settings, max_draws=6)
+    assert sol.stats["samples_drawn"] == 6 and sol.stats["samples_used"] == 6 - int(np.sum(c[:6] < 0)) < 6
+    with pytest.raises(g.GMRInputError, match="max_draws must be >= 1"):
+        g.basin_probability(leaky, f, A, key, 6, x_range=x_range, max_draws=0)
     with pytest.raises(g.GMRInputError, match="no covariance"):
         g.basin_probability(g.from_terms([1.0], [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": 1.0}]),
                             f, A, jax.random.key(0), 2, x_range=x_range)

@@ -36,9 +36,11 @@ class BasinProbability(eqx.Module):
 
 def feeds_energy(model: GlobalModel, wells: np.ndarray, x_range) -> list[str]:
     """Why `model`'s damping is not dissipative where its basin map is read, or [] (`damping_faults`
-    per DOF: D(x, v) v >= 0 over the span of the DOF's wells widened by half of it, or `x_range` with
-    one well, and |v| up to the speed of a fall from anywhere in `x_range` to its lowest-lying well,
-    sqrt(2 max(V - V_well) / m), V = ∫ F dx)."""
+    per DOF: D(x, v) v >= 0 over the span of the DOF's wells widened by half of it on either side, or
+    `x_range` so widened with one well, and |v| up to the speed of a fall from anywhere in `x_range` to
+    its lowest-lying well, sqrt(2 max(V - V_well) / m_i), V = ∫ F dx). A DOF without a well is not
+    read. The bound leaves out the energy the load puts in and, in a chain, the masses a cell moves
+    beyond its own: a check of the span of use, not a proof of passivity."""
     x_range = np.broadcast_to(np.asarray(x_range, float), (model.n_dof, 2))
     out = []
     for i in range(model.n_dof):
@@ -86,7 +88,7 @@ def basin_probability(
     - `key`, `n`: the `jax.random` key and the number of samples the probabilities average over.
     - `x_range`: (lo, hi) or (dof, 2), the interval of each DOF in which each sample's stable
       wells are searched (`stable_wells`), e.g. the span of the training data.
-    - `progress`: optional `progress(done, n)` after each sample swept.
+    - `progress`: optional `progress(used, n)` after each draw.
     - `max_draws`: at most this many draws (default 8 n) to find the n samples.
 
     **Returns:** a `Solution` whose `value` is a `BasinProbability`. A sample whose number of
@@ -107,7 +109,9 @@ def basin_probability(
     if n < 1:
         raise GMRInputError(f"basin_probability: n must be >= 1, got {n}")
     max_draws = 8 * n if max_draws is None else int(max_draws)
-    first = sample_models(model, key, min(n, max(max_draws, 1)))  # refuses a model without a covariance first
+    if max_draws < 1:
+        raise GMRInputError(f"basin_probability: max_draws must be >= 1, got {max_draws}")
+    first = sample_models(model, key, min(n, max_draws))  # refuses a model without a covariance first
     wells0 = stable_wells(model, x_range)
     mean_map = basin_map(model, f, A, wells0, x0=x0, settings=settings, chunk=chunk, throw=False)
     n_wells = np.sum(np.isfinite(wells0), axis=1)
@@ -126,14 +130,13 @@ def basin_probability(
             w = stable_wells(m, x_range)
             if w.shape != wells0.shape or np.any(np.sum(np.isfinite(w), axis=1) != n_wells):
                 other += 1
-                continue
-            if feeds_energy(m, w, x_range):
+            elif feeds_energy(m, w, x_range):
                 passive += 1
-                continue
-            sol = basin_map(m, f, A, w, x0=x0, settings=settings, chunk=chunk, throw=False)
-            configs.append(np.asarray(sol.value.config))
-            for name, c in sol.stats["counts"].items():
-                counts[name] = counts.get(name, 0) + c
+            else:
+                sol = basin_map(m, f, A, w, x0=x0, settings=settings, chunk=chunk, throw=False)
+                configs.append(np.asarray(sol.value.config))
+                for name, c in sol.stats["counts"].items():
+                    counts[name] = counts.get(name, 0) + c
             if progress is not None:
                 progress(len(configs), n)
     used = len(configs)

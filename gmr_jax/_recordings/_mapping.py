@@ -40,12 +40,17 @@ def read_mat(path: Path, src: str) -> dict:
     return out
 
 
+#: MATLAB's numeric classes (v7.3 stores each variable's class in its MATLAB_class attribute)
+NUMERIC_CLASSES = ("double", "single", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64")
+
+
 def read_mat73(path: Path, src: str) -> dict:
     """Every numeric variable of a MATLAB v7.3 file: an HDF5 file behind a 512-byte user block.
-    Each top-level dataset whose MATLAB_class is numeric, transposed (MATLAB stores column-major,
-    so h5py sees the dimensions reversed: an N x 1 column arrives (1, N)); structs, cells (groups
-    and `#refs#`), text, logicals, complex and empty values are left out, as scipy.io leaves them
-    for the older formats."""
+    Each top-level dataset of a numeric MATLAB_class (`NUMERIC_CLASSES`), transposed (MATLAB
+    stores column-major, so h5py sees the dimensions reversed: an N x 1 column arrives (1, N));
+    structs, cells (groups and `#refs#`), text, logicals, objects (string, datetime, tables:
+    uint32 references with MATLAB_object_decode), complex and empty values are left out (as
+    scipy.io leaves the older formats' text, cells, structs and objects)."""
     try:
         import h5py
     except ImportError:
@@ -60,13 +65,12 @@ def read_mat73(path: Path, src: str) -> dict:
                     continue
                 cls = d.attrs.get("MATLAB_class", b"double")
                 cls = cls.decode() if isinstance(cls, bytes) else str(cls)
-                if cls in ("char", "logical", "cell", "struct", "function_handle") or d.attrs.get("MATLAB_empty", 0):
-                    continue
-                if d.dtype.kind not in "fiu":  # complex is a compound (real, imag)
+                if (cls not in NUMERIC_CLASSES or "MATLAB_object_decode" in d.attrs or d.attrs.get("MATLAB_empty", 0)
+                        or d.dtype.kind not in "fiu"):  # complex is a compound (real, imag)
                     continue
                 out[k] = np.asarray(d[()]).T
-    except OSError as e:
-        raise GMRInputError(f"{src}: cannot read as a MATLAB v7.3 (HDF5) file ({e})") from None
+    except Exception as e:  # noqa: BLE001 - any unreadable file is a user error here
+        raise GMRInputError(f"{src}: cannot read as a MATLAB v7.3 (HDF5) file ({type(e).__name__}: {e})") from None
     return out
 
 
