@@ -53,8 +53,8 @@ def main():
             rows.append((seed, "noise-free" if v_clean else "as recorded", b, se, orders))
             print(rows[-1][:2], b[:4], se[:4], orders, flush=True)
     lines = ["# Noise on v and the damping law (issue 15)", "",
-             f"`python studies/velocity_noise.py --seeds {args.seeds}` ({(time.time() - t0) / 60:.1f} min on the "
-             "shared 2-core dev machine).", "", __doc__.split("\n\n    python")[0].split("\n\n", 1)[1], "",
+             (f"`python studies/velocity_noise.py --seeds {args.seeds}` ({(time.time() - t0) / 60:.1f} min on the "
+              "shared 2-core dev machine)."), "", __doc__.split("\n\n    python")[0].split("\n\n", 1)[1], "",
              f"Truth: 10 v^3. Bistable joint, position-independent damping, base amplitude 5 degrees, {args.snr:g} dB.", "",
              "| seed | v | velocity orders chosen | v coefficient (se) | v^3 coefficient (se) | v^3 error / se |",
              "|---|---|---|---|---|---|"]
