@@ -408,3 +408,44 @@ def test_the_band_holds_the_truncation_at_the_degree_cap(monkeypatch):
         band = [g.force_band(sol.value, jnp.asarray([x]), level=0.95) for x in xs]
         cover[on] = np.mean([float(b.lower[0]) <= t <= float(b.upper[0]) for b, t in zip(band, truth)])
     assert cover[True] >= 0.9 and cover[False] < 0.9, cover  # measured 100 % and 85 %
+
+
+def test_velocity_noise_correction_unbiases_a_cubic_damping():
+    """`_joint._velocity_noise` / `_velocity_gram`: a force 10 v^3 regressed on a noisy v (white, 10 % of
+    its RMS) is attenuated and leaks into v (E[(v + e)^3] = v^3 + 3 s^2 v); the corrected columns and
+    normal equations give back 10 within the scatter (mean over draws), with and without a row low-pass."""
+    from gmr_jax._coordination._joint import RowFilter, _Layout, _velocity_gram, _velocity_noise, row_filter
+
+    rng = np.random.default_rng(0)
+    n = 4000
+    t = np.arange(n) / 200.0
+    v = (np.sin(2 * np.pi * 1.1 * t) + 0.5 * np.sin(2 * np.pi * 2.3 * t + 1.0))[None, :]  # one well
+    u = 0.2 * np.cos(2 * np.pi * 1.1 * t)[None, :]
+    y = 10.0 * v**3
+    layout = _Layout(1, 0, (1, 3))  # columns T0, T1(u), v T0 (C(0)), v, v^3: v twice, so use the C(0) one
+    keep = np.array([0, 1, 2, 4])
+    s2 = (0.1 * np.std(v)) ** 2
+    w = np.ones((1, n))
+    for rows in (None, row_filter(1 / 200.0, 8.0)):
+        plain, fixed = [], []
+        for _ in range(30):
+            vn = v + np.sqrt(s2) * rng.standard_normal(v.shape)
+            cols = np.asarray(layout.columns(jnp.asarray(u), jnp.asarray(vn)))
+            cols_c, vd = _velocity_noise(cols, u, vn, np.array([s2]), layout)
+            for c, out in ((cols, plain), (cols_c, fixed)):
+                cc, yy, ww = c, y, w
+                if rows is not None:
+                    from gmr_jax._coordination._joint import filtered_rows
+
+                    cc, yy, ww, _ = filtered_rows(rows, c, y, w, w)
+                scale = np.ones(layout.p)
+                gram = np.einsum("wn,wnp,wnq->pq", ww, cc, cc)
+                rhs = np.einsum("wn,wnp,wn->p", ww, cc, yy)
+                if out is fixed:
+                    gram = _velocity_gram(gram, vd, np.array([s2]), ww, rows, scale)
+                out.append(np.linalg.solve(gram[np.ix_(keep, keep)], rhs[keep])[-1])
+        plain, fixed = np.array(plain), np.array(fixed)
+        se = fixed.std(ddof=1) / np.sqrt(fixed.size)
+        assert abs(fixed.mean() - 10.0) < 4 * se + 1e-3, (rows is None, fixed.mean(), se)
+        assert plain.mean() < 10.0 - 6 * se  # uncorrected: attenuated (the test has teeth)
+    assert isinstance(row_filter(1 / 200.0, 8.0), RowFilter)

@@ -97,6 +97,25 @@ def x_noise_variance(recs, group: list[int], i: int) -> float | None:
     return var / total if total else None
 
 
+def v_noise_variance(recs, group: list[int], i: int) -> float | None:
+    """The variance of the white noise on DOF `i`'s measured velocity at one well (as
+    `x_noise_variance`), for the joint regression's velocity columns (`_joint._velocity_noise`).
+    None where that correction does not hold: v estimated (from x, or integrated from a), x
+    integrated from v, or accelerations estimated from v (their noise is the noise of v)."""
+    total, var = 0, 0.0
+    for k in group:
+        r = recs[k]
+        how = (r.derivation or {}).get("a")
+        if r.v is None or "v" in r.derived or "x" in r.derived or (how is not None and how["from"] == "v"):
+            return None
+        floor = white_floor(r.v[:, i], r.dt)
+        if floor is None:
+            return None
+        total += r.n_samples
+        var += r.n_samples * floor
+    return var / total if total else None
+
+
 #: The spectrum's level over the top fifth of the band and over the fifth centred on half of it
 #: may differ by at most this factor for the floor to be read as white noise (`white_floor`; the
 #: band means of white noise scatter by a few per cent).

@@ -421,9 +421,13 @@ def _derived_rows(recs, groups, i: int) -> RowFilter | None:
     return row_filter(float(dts[0]), edge) if edge > 0 else None
 
 
+#: the joint regression corrects its velocity columns for the noise of a measured v (`_joint._velocity_noise`)
+VELOCITY_EIV = True
+
+
 def _joint(fits: LocalFit, xs, vs, ys, w, speed: float, restoring: Solution | None = None,
            settings: JointSettings = JointSettings(), x_noise=None, rows: RowFilter | None = None,
-           segs=None, gain=None) -> Solution:
+           segs=None, gain=None, v_noise=None) -> Solution:
     """The joint coordination (`joint_coordinate`) as a `Solution` like `coordinate`'s; given
     the paper route's `restoring` (a `coordinate` Solution), only the damping is refitted,
     to the force left after its restoring force. `x_noise`: per well, the variance of the noise
@@ -439,10 +443,12 @@ def _joint(fits: LocalFit, xs, vs, ys, w, speed: float, restoring: Solution | No
         gain_segs, ys = gain
     var = np.asarray(fits.rss) / np.maximum(np.asarray(fits.n_samples), 1.0)
     var = np.where(var > 0, var, np.max(var) if np.any(var > 0) else 1.0)
+    # the noise of a measured v (`_joint._velocity_noise`), where every well has it
+    v_eiv = None if not VELOCITY_EIV or v_noise is None or any(v is None for v in v_noise) else np.asarray(v_noise, float)
     if restoring is None:
         eiv = None if x_noise is None or any(v is None for v in x_noise) else np.asarray(x_noise, float)
         stiff, vdamp, pdamp, cov, stats = joint_coordinate(xs, vs, ys, w, eq, var, speed, settings, x_noise=eiv,
-                                                           rows=rows, band=segs, gain=gain_segs)
+                                                           rows=rows, band=segs, gain=gain_segs, v_noise=v_eiv)
     else:
         stiff = np.asarray(restoring.value.stiffness)
         fx = np.polynomial.polynomial.polyval(np.asarray(xs), stiff)
@@ -452,7 +458,7 @@ def _joint(fits: LocalFit, xs, vs, ys, w, speed: float, restoring: Solution | No
         settings = JointSettings(log_lambdas=(0.0,), damping_only=True)
 
         _, vdamp, pdamp, cov_j, stats = joint_coordinate(xs, vs, ys, w, eq, var, speed, settings, rows=rows,
-                                                         band=segs, gain=gain_segs)
+                                                         band=segs, gain=gain_segs, v_noise=v_eiv)
         nk, nj = stiff.shape[0], cov_j.shape[0] - (settings.max_degree + 1)
         cov = np.zeros((nk + nj, nk + nj))
         cov[:nk, :nk] = np.asarray(restoring.aux)[:nk, :nk]
@@ -555,7 +561,7 @@ def _truncation_degree(coord: Solution, fits: LocalFit, xs, vs, ys, w, library: 
 
 def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordination: str, mass: float, i: int,
                     odd_only: bool = False, x_noise=None, rows: RowFilter | None = None, band=None, segs=None,
-                    gain=None):
+                    gain=None, v_noise=None):
     """One DOF's coordination route (`reconstruct`'s `coordination`; "auto": the paper route, GLS,
     checked for inadmissible shapes and faults, replaced or complemented by the joint regression where
     the module's rules say so). `odd_only`: the GLS takes odd degrees only (a DOF that borrowed
@@ -568,7 +574,7 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
     energy = None if speed is None else 0.5 * float(mass) * speed**2  # the model's energy bound
     lowered = []  # why the degree was lowered: to confine a borrowed law, or by the truncation test
     if coordination == "joint":
-        coord = _joint(fits, xs, vs, ys, w, speed, x_noise=x_noise, rows=rows, segs=segs, gain=gain)
+        coord = _joint(fits, xs, vs, ys, w, speed, x_noise=x_noise, rows=rows, segs=segs, gain=gain, v_noise=v_noise)
     else:
         coord = jax.device_get(coordinate(fits, library, method="gls" if coordination == "auto" else coordination,
                                           confining=odd_only, throw=False))
@@ -584,10 +590,10 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
             paper = coord
             paper_sound = not faults["data"]
             if faults["data"]:
-                coord, route = _joint(fits, xs, vs, ys, w, speed, x_noise=x_noise, rows=rows, segs=segs, gain=gain), "joint"
+                coord, route = _joint(fits, xs, vs, ys, w, speed, x_noise=x_noise, rows=rows, segs=segs, gain=gain, v_noise=v_noise), "joint"
             elif faults["blowup"]:  # it explains the wells' data, its shape between them is the fault
                 coord, route = _joint(fits, xs, vs, ys, w, speed, settings=_replacement_settings(paper),
-                                      x_noise=x_noise, rows=rows, segs=segs, gain=gain), "joint"
+                                      x_noise=x_noise, rows=rows, segs=segs, gain=gain, v_noise=v_noise), "joint"
             else:
                 # A restoring shape that is inadmissible (even degree, turning outward, extra sign changes)
                 # is the paper's verdict only where redundant local data test it (the over-determined GLS:
@@ -633,14 +639,14 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                     unconfirmed = True
                 if unconfirmed:
                     cand = _joint(fits, xs, vs, ys, w, speed, settings=_replacement_settings(paper), x_noise=x_noise,
-                                  rows=rows, segs=segs, gain=gain)
+                                  rows=rows, segs=segs, gain=gain, v_noise=v_noise)
                     ok, reason = _joint_explains_as_well(cand, paper, xs, vs, ys, w)
                     if ok:
                         coord, route = cand, "joint"
                     else:
                         why = why + [f"kept: {reason}"]
                 if route == "gls" and faults["damping"]:
-                    coord, route = _joint(fits, xs, vs, ys, w, speed, restoring=paper, rows=rows, segs=segs, gain=gain), "gls + joint damping"
+                    coord, route = _joint(fits, xs, vs, ys, w, speed, restoring=paper, rows=rows, segs=segs, gain=gain, v_noise=v_noise), "gls + joint damping"
                 if route != "joint" and unconfirmed:
                     warnings += _sanity.check_escape_reach(i, np.asarray(paper.value.stiffness),
                                                            np.asarray(fits.equilibrium), energy)
@@ -899,7 +905,7 @@ def reconstruct(
     recs = [restore_slow(r, y) for r, y in zip(recs, targets)]
     stiff, vdamp, pdamp, se_s, se_v, se_p, covs, reports = [], [], [], [], [], [], [], []
     k1 = library.column(STIFFNESS, 1)  # restoring_order >= 1 (`Library`)
-    local, noises, x_noises, row_filters, segs_all, gains = [], [], [], [], [], []
+    local, noises, x_noises, row_filters, segs_all, gains, v_noises = [], [], [], [], [], [], []
     for i in range(d):
         _, labels, groups = wells[i]
         xs, w = _pad_stack([[recs[k].x[:, i] for k in g] for g in groups])
@@ -969,6 +975,8 @@ def reconstruct(
         segs_all.append(segs)
         noises.append(noise)
         x_noises.append(x_noise)
+        # the noise of a measured v, for the joint regression's velocity columns (`_joint._velocity_noise`)
+        v_noises.append([_noise.v_noise_variance(recs, grp, i) if errors_in_variables else None for grp in groups])
     # cells of one design: the well-excited cells lend the curvature the weakly excited ones miss
     plan, design = [None] * d, None
     if shared_design is None:
@@ -985,7 +993,7 @@ def reconstruct(
         say(f"{f'DOF {i} ({i + 1}/{d}): ' if d > 1 else ''}coordination ({coordination})")
         coord, route, why, paper_sound, confining, found = _coordinate_dof(
             fits, xs, vs, ys, w, library, coordination, float(masses[i]), i, odd_only=any(borrowed),
-            x_noise=x_noises[i], rows=row_filters[i], band=band, segs=segs_all[i], gain=gains[i])
+            x_noise=x_noises[i], rows=row_filters[i], band=band, segs=segs_all[i], gain=gains[i], v_noise=v_noises[i])
         if any(borrowed) and route == "joint":
             # the law with the borrowed orders was inadmissible and the joint regression (which sees
             # only this cell's data) would replace it: the cell goes on alone (torque-free Kresling,
@@ -994,7 +1002,7 @@ def reconstruct(
             fits, borrowed = data_fits, []
             coord, route, why, paper_sound, confining, found = _coordinate_dof(
                 fits, xs, vs, ys, w, library, coordination, float(masses[i]), i, x_noise=x_noises[i],
-                rows=row_filters[i], band=band, segs=segs_all[i], gain=gains[i])
+                rows=row_filters[i], band=band, segs=segs_all[i], gain=gains[i], v_noise=v_noises[i])
         warnings += found
         if coord.result != RESULTS.successful:
             failure.note(coord.result, f"DOF {i}: coordination of the equilibria "
