@@ -145,6 +145,10 @@ def measure(model, system, i, n=401):
     return out
 
 
+#: extra `reconstruct` keywords (`--velocity-eiv`)
+OPTIONS: dict = {}
+
+
 def run_case(label, factory, amplitude, snr, seed):
     system = factory()
     recs = g.systems.make_recordings(system, amplitude, snr_db=snr, seed=seed)
@@ -152,7 +156,7 @@ def run_case(label, factory, amplitude, snr, seed):
     t0 = time.time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        sol = g.reconstruct(recs, g.Library(r, dd), throw=False)
+        sol = g.reconstruct(recs, g.Library(r, dd), throw=False, **OPTIONS)
     seconds = time.time() - t0
     rows = []
     for i in range(sol.value.n_dof):
@@ -207,7 +211,10 @@ def main():
     p.add_argument("--quick", action="store_true")
     p.add_argument("--basins", action="store_true")
     p.add_argument("--out", default=None)
+    p.add_argument("--velocity-eiv", action="store_true", help="reconstruct(velocity_eiv=True)")
     args = p.parse_args()
+    if args.velocity_eiv:
+        OPTIONS["velocity_eiv"] = True
     cases = [CASES[k] for k in QUICK] if args.quick else CASES
     out = Path(args.out or RESULTS / ("coverage_quick.md" if args.quick else "coverage.md"))
     cmd = "python studies/coverage.py" + " ".join([""] + sys.argv[1:])
@@ -219,7 +226,7 @@ def main():
         rows += got
     lines = [
         "# Coverage of the global model's 95 % band", "",
-        f"Command: `{cmd}` (module docstring: definitions). `reconstruct` defaults (library orders "
+        f"Command: `{cmd}` (module docstring: definitions). `reconstruct` defaults{' and velocity_eiv=True' if args.velocity_eiv else ''} (library orders "
         f"`system.orders['gmr']`), `force_band(level=0.95)` from `GlobalModel.covariance`.", "",
         "Columns: coverage of F_r,true by the 95 % band on the interwell span (target >= 90 %) and on the "
         "error box; the band's median full width on the span relative to max |F_r,true| there; the model's "

@@ -48,7 +48,8 @@ normal matrix for the noise it holds, to O(s^4) (`_velocity_noise`, `_velocity_g
 rows' low-pass where it applies). Bistable joint (10 v^3), 5 degrees, 30 dB, 4 seeds: v^3 was
 9.28-9.49 (7-10 standard errors low, v|v| beside it), now 9.90-10.04 (within 2.6), v^3 alone on
 2 of 4 (`studies/velocity_noise.py`). Not for friction (sgn(v): no smooth expansion at 0), and not
-where v is estimated or x integrated from it.
+where v is estimated or x integrated from it. `reconstruct(velocity_eiv=True)` asks for it (off by
+default while the correction's own uncertainty is not in the band).
 """
 
 import dataclasses
