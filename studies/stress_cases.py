@@ -141,10 +141,15 @@ def oracle_stiffness(system, dof: int, order: int = 2) -> np.ndarray:
     return np.asarray(coef)[: int(degree) + 1]
 
 
-def oracle_error(system, dof: int, order: int = 2) -> float:
-    xs = np.linspace(*system.x_range[dof], 401)
+def truth_on_box(system, dof: int, n: int = 401) -> tuple[np.ndarray, np.ndarray]:
+    """(xs, F(xs)): the truth's restoring force of `dof` on `n` points of its metrics box (the other cells at 0)."""
+    xs = np.linspace(*system.x_range[dof], n)
     d = system.truth.n_dof
-    truth = np.asarray(jax.vmap(lambda x: system.truth.restoring(jnp.zeros(d).at[dof].set(x))[dof])(jnp.asarray(xs)))
+    return xs, np.asarray(jax.vmap(lambda x: system.truth.restoring(jnp.zeros(d).at[dof].set(x))[dof])(jnp.asarray(xs)))
+
+
+def oracle_error(system, dof: int, order: int = 2) -> float:
+    xs, truth = truth_on_box(system, dof)
     fit = np.polynomial.polynomial.polyval(xs, oracle_stiffness(system, dof, order))
     return float(np.linalg.norm(fit - truth) / np.linalg.norm(truth))
 
@@ -158,9 +163,7 @@ def noise_floor(system, dof: int, se: np.ndarray, draws: int = 400, seed: int = 
     nodes = np.asarray(system.equilibria[:, dof], float)
     taylor = truth_taylor(system, dof)
     fact = np.array([1.0, 1.0, 2.0])
-    xs = np.linspace(*system.x_range[dof], 401)
-    d = system.truth.n_dof
-    truth = np.asarray(jax.vmap(lambda x: system.truth.restoring(jnp.zeros(d).at[dof].set(x))[dof])(jnp.asarray(xs)))
+    xs, truth = truth_on_box(system, dof)
     rng = np.random.default_rng(seed)
     errs = []
     for _ in range(draws):
@@ -170,15 +173,22 @@ def noise_floor(system, dof: int, se: np.ndarray, draws: int = 400, seed: int = 
     return np.array(errs)
 
 
-def local_se(res, system, dof: int) -> np.ndarray | None:
-    """(wells, 3) the local fits' standard errors of F, F', F''/2 at the truth's wells of `dof`
-    (`se_h`: the local fit's, or the hierarchical fit's where larger or the term was dropped; nearest fitted well; None where the fit found a different number of wells)."""
+def matched_wells(res, system, dof: int) -> list | None:
+    """Per truth well of `dof`, the resolution report's nearest fitted well (None where the fit found a
+    different number of wells)."""
     wells = [w for w in res.wells if w.dof == dof]
     nodes = np.asarray(system.equilibria[:, dof], float)
     if len(wells) != nodes.size:
         return None
     eq = np.array([w.equilibrium for w in wells])
-    return np.array([[t.se_h for t in wells[int(np.argmin(np.abs(eq - x)))].terms[:3]] for x in nodes])
+    return [wells[int(np.argmin(np.abs(eq - x)))] for x in nodes]
+
+
+def local_se(res, system, dof: int) -> np.ndarray | None:
+    """(wells, 3) the local fits' standard errors of F, F', F''/2 at the truth's wells of `dof`
+    (`se_h`: the local fit's, or the hierarchical fit's where larger or the term was dropped; `matched_wells`)."""
+    wells = matched_wells(res, system, dof)
+    return None if wells is None else np.array([[t.se_h for t in w.terms[:3]] for w in wells])
 
 
 # --- criteria ---------------------------------------------------------------------------------
@@ -420,9 +430,7 @@ def floor_check(case: Case, seeds: int) -> list[str]:
             sol = g.reconstruct(recordings(case, amp, seed), throw=False)
         res = sol.stats["resolution"]
         ses.append([local_se(res, system, i) for i in range(d)])
-        coefs.append([[[w for w in res.wells if w.dof == i][int(np.argmin([abs(w.equilibrium - x) for w in res.wells
-                                                                          if w.dof == i]))].terms[2].coef
-                        for x in np.asarray(system.equilibria[:, i], float)] for i in range(d)])
+        coefs.append([[w.terms[2].coef for w in matched_wells(res, system, i)] for i in range(d)])
         errs.append([g.metrics.restoring_error(sol.value, system.truth, i, system.x_range[i]) for i in range(d)])
         print(case.name, seed, errs[-1], flush=True)
     coefs, ses, errs = np.array(coefs), np.array(ses), np.array(errs)
@@ -462,6 +470,13 @@ def floor_check(case: Case, seeds: int) -> list[str]:
     return lines + [""]
 
 
+def emit(path: str, lines: list[str]) -> None:
+    """Write the report's `lines` to `path` and print them."""
+    with open(path, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", default=",".join(CASES))
@@ -477,10 +492,7 @@ def main():
         lines = sweep(args.sweep, args.seeds)
         lines.insert(1, f"\n`python studies/stress_cases.py --sweep {args.sweep} --seeds {args.seeds} --out {args.out}` "
                         f"({(time.time() - t0) / 60:.1f} min).")
-        with open(args.out, "w") as fh:
-            fh.write("\n".join(lines) + "\n")
-        print("\n".join(lines))
-        return
+        return emit(args.out, lines)
     if args.floor_seeds:
         t0 = time.time()
         lines = [f"# Stress cases: the noise floor against {args.floor_seeds} noise seeds", ""]
@@ -490,10 +502,7 @@ def main():
                 lines += slow_content(CASES[name], min(args.floor_seeds, 4))
         lines.insert(1, f"\n`python studies/stress_cases.py --floor-seeds {args.floor_seeds} --cases {args.cases} "
                         f"--out {args.out}` ({(time.time() - t0) / 60:.1f} min on the shared 2-core dev machine).")
-        with open(args.out, "w") as fh:
-            fh.write("\n".join(lines) + "\n")
-        print("\n".join(lines))
-        return
+        return emit(args.out, lines)
     t_start = time.time()
     body, summary = [], []
     for name in args.cases.split(","):

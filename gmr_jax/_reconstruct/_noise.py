@@ -77,24 +77,35 @@ def well_noise(recs, group: list[int], i: int, masses: np.ndarray, topology) -> 
                        white=jnp.asarray(white, float))
 
 
+def _pooled_floor(recs, group: list[int], i: int, channel: str, usable) -> float | None:
+    """The white floor (`white_floor`) of DOF `i`'s `channel` ("x" or "v") over the recordings `group`,
+    pooled by samples; None where `usable(recording)` is False for any, or any floor is not white."""
+    total, var = 0, 0.0
+    for k in group:
+        r = recs[k]
+        if not usable(r):
+            return None
+        floor = white_floor(getattr(r, channel)[:, i], r.dt)
+        if floor is None:
+            return None
+        total += r.n_samples
+        var += r.n_samples * floor
+    return var / total if total else None
+
+
+def _a_from(r) -> str | None:
+    """The channel a recording's accelerations were estimated from, None where measured."""
+    how = (r.derivation or {}).get("a")
+    return None if how is None else how["from"]
+
+
 def x_noise_variance(recs, group: list[int], i: int) -> float | None:
     """The variance of the white noise on DOF `i`'s measured displacement at one well (the
     recordings `group`; each channel's Welch floor, `channel_variance`, pooled by samples), for
     the errors-in-variables correction of its local fit (`_fit/_errors_in_variables.py`). None
     where that correction does not hold: x estimated (integrated), or accelerations estimated
     from x (their noise is the noise of x, filtered: not independent of it)."""
-    total, var = 0, 0.0
-    for k in group:
-        r = recs[k]
-        how = (r.derivation or {}).get("a")
-        if "x" in r.derived or (how is not None and how["from"] == "x"):
-            return None
-        floor = white_floor(r.x[:, i], r.dt)
-        if floor is None:
-            return None
-        total += r.n_samples
-        var += r.n_samples * floor
-    return var / total if total else None
+    return _pooled_floor(recs, group, i, "x", lambda r: "x" not in r.derived and _a_from(r) != "x")
 
 
 def v_noise_variance(recs, group: list[int], i: int) -> float | None:
@@ -102,18 +113,8 @@ def v_noise_variance(recs, group: list[int], i: int) -> float | None:
     `x_noise_variance`), for the joint regression's velocity columns (`_joint._velocity_noise`).
     None where that correction does not hold: v estimated (from x, or integrated from a), x
     integrated from v, or accelerations estimated from v (their noise is the noise of v)."""
-    total, var = 0, 0.0
-    for k in group:
-        r = recs[k]
-        how = (r.derivation or {}).get("a")
-        if r.v is None or "v" in r.derived or "x" in r.derived or (how is not None and how["from"] == "v"):
-            return None
-        floor = white_floor(r.v[:, i], r.dt)
-        if floor is None:
-            return None
-        total += r.n_samples
-        var += r.n_samples * floor
-    return var / total if total else None
+    return _pooled_floor(recs, group, i, "v", lambda r: r.v is not None and "v" not in r.derived
+                         and "x" not in r.derived and _a_from(r) != "v")
 
 
 #: The spectrum's level over the top fifth of the band and over the fifth centred on half of it
