@@ -22,14 +22,19 @@ def squeeze(v) -> np.ndarray:
 
 
 def read_mat(path: Path, src: str) -> dict:
-    """Every numeric variable of a MATLAB file: v4-v7.2 by scipy.io, v7.3 (HDF5, which scipy
-    refuses) by h5py where it is installed (`read_mat73`)."""
+    """Every numeric variable of a MATLAB file: v4-v7.2 by scipy.io, v7.3 (HDF5: the header's
+    version 2.0, which scipy does not read) by h5py where it is installed (`read_mat73`)."""
     import scipy.io
+    import scipy.io.matlab
 
     try:
-        raw = scipy.io.loadmat(path, squeeze_me=False)
-    except NotImplementedError:  # scipy's answer to a v7.3 header
+        v73 = scipy.io.matlab.matfile_version(path)[0] == 2
+    except Exception:  # noqa: BLE001 - not a MATLAB header: loadmat below names the problem
+        v73 = False
+    if v73:
         return read_mat73(path, src)
+    try:
+        raw = scipy.io.loadmat(path, squeeze_me=False)
     except Exception as e:  # noqa: BLE001 - any unreadable file is a user error here
         raise GMRInputError(f"{src}: cannot read as a MATLAB .mat file ({type(e).__name__}: {e})") from None
     out = {}
