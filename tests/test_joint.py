@@ -442,7 +442,7 @@ def test_velocity_noise_correction_unbiases_a_cubic_damping():
                 gram = np.einsum("wn,wnp,wnq->pq", ww, cc, cc)
                 rhs = np.einsum("wn,wnp,wn->p", ww, cc, yy)
                 if out is fixed:
-                    gram = _velocity_gram(gram, vd, np.array([s2]), ww, rows, scale)
+                    gram = _velocity_gram(gram, vd, np.array([s2]), ww, rows, scale)[0]
                 out.append(np.linalg.solve(gram[np.ix_(keep, keep)], rhs[keep])[-1])
         plain, fixed = np.array(plain), np.array(fixed)
         se = fixed.std(ddof=1) / np.sqrt(fixed.size)

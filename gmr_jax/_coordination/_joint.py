@@ -68,6 +68,7 @@ from ._hermite import monomial_map
 #: Damping power D v below -this x its largest value on the check grid counts as feeding energy in
 #: (a damping law that is zero at a point, like the joint's 50 x^2 v, fits slightly negative there).
 DISSIPATION_TOLERANCE = 1e-3
+SANDWICH = True
 #: ... in the damping-only regression (the restoring force fixed by the paper route), at each speed of the check
 #: grid against the largest |D v| at that speed, the speeds geometric from `DISSIPATION_SLOWEST` x the bound up to
 #: it: a law whose top power of v dominates at the bound cannot hide a negative viscous term below it, where every
@@ -249,14 +250,37 @@ def _velocity_gram(gram, vd, s2v, w, rows, scale):
 
         h2 = np.asarray(rows.taps, float) ** 2
         prod = fftconvolve(prod, h2[None, :, None, None], mode="same", axes=1)[:, :: int(rows.stride)]
-    noise = np.einsum("wt,wtab->ab", w, prod) / np.outer(scale[idx], scale[idx])
+    prod = prod / np.outer(scale[idx], scale[idx])
+    noise = np.einsum("wt,wtab->ab", w, prod)
     g2 = np.array(gram, float)
     g2[np.ix_(idx, idx)] -= noise
     g2 = 0.5 * (g2 + g2.T)
     if not np.all(np.isfinite(g2)):
-        return gram
+        return gram, None
     eig = np.linalg.eigvalsh(g2)
-    return g2 if eig.min() >= -1e-10 * eig.max() else gram
+    return (g2, (idx, prod)) if eig.min() >= -1e-10 * eig.max() else (gram, None)
+
+
+def _sandwich(cols, ys, w, theta, ainv, mask, gram, noise, sigma2):
+    """The covariance of the coefficients corrected for the noise of v (`_velocity_noise`): their
+    residual is heteroscedastic (a column's noise g'(v) e times its coefficient grows with |v|,
+    where v^3 has its leverage), so sigma^2 A^-1 is too narrow there. The corrected score of row
+    i, psi_i = w_i (h_i r_i + N_i theta) (h the corrected columns, r the residual, N_i the noise
+    its products hold), gives A^-1 (sum psi psi') A^-1 for the data's part (small-sample factor
+    n / (n - p)); the prior's part, sigma^2 A^-1 P A^-1, as in sigma^2 A^-1 = sigma^2 A^-1 (G + P) A^-1."""
+    idx, prod = noise
+    m = mask.astype(float)
+    th = theta * m
+    r = ys - cols @ th
+    psi = w[..., None] * cols * r[..., None]
+    psi[..., idx] += w[..., None] * np.einsum("wtab,b->wta", prod, th[idx])
+    psi = psi[w > 0] * m
+    k = int(m.sum())
+    meat = psi.T @ psi * psi.shape[0] / max(psi.shape[0] - k, 1)
+    a = np.linalg.pinv(ainv * np.outer(m, m)) * np.outer(m, m)
+    pen = a - gram * np.outer(m, m)
+    ai = ainv * np.outer(m, m)
+    return ai @ (meat + sigma2 * pen) @ ai
 
 
 def _candidates(n_wells: int, layout: _Layout, settings: JointSettings):
@@ -498,8 +522,9 @@ def joint_coordinate(
     recorded = (gram, rhs)  # the recorded samples' normal equations (their residual gives sigma^2)
     if x_noise is not None and not settings.damping_only:
         gram, rhs = _corrected(gram, rhs, u, vs, ys, w, np.asarray(x_noise, float) / (2.0 * h) ** 2, layout, scale)
+    v_rows = None
     if vd is not None:
-        gram = _velocity_gram(gram, vd, v_noise, w, rows, scale)
+        gram, v_rows = _velocity_gram(gram, vd, v_noise, w, rows, scale)
     sr, sd = scale[layout.restoring], scale[layout.damping]
     omega_r = _penalty(layout.k, settings.penalty_order) / np.outer(sr, sr)
     omega_d = _penalty(layout.j, min(2, layout.j)) / np.outer(sd, sd) if layout.j >= 2 else np.zeros((layout.j + 1,) * 2)
@@ -552,6 +577,8 @@ def joint_coordinate(
     k, j, vel = meta[best]
     sigma2 = float(rss[best]) / max(n - float(edf[best]), 1.0)  # the recorded samples' residual
     cov_theta = sigma2 * ainv[best] * masks[best][:, None] * masks[best][None, :]
+    if v_rows is not None and SANDWICH:
+        cov_theta = _sandwich(cols, ys, w, theta[best], ainv[best], masks[best], gram, v_rows, sigma2)
     # map to monomial coefficients in x
     to_x = lambda deg: np.asarray(monomial_map(c, 2.0 * h, deg + 1)) @ cheb_to_monomial(deg)  # noqa: E731
     n_vel = max((*layout.vel, 1)) + 1
