@@ -449,3 +449,38 @@ def test_velocity_noise_correction_unbiases_a_cubic_damping():
         assert abs(fixed.mean() - 10.0) < 4 * se + 1e-3, (rows is None, fixed.mean(), se)
         assert plain.mean() < 10.0 - 6 * se  # uncorrected: attenuated (the test has teeth)
     assert isinstance(row_filter(1 / 200.0, 8.0), RowFilter)
+
+
+def test_velocity_noise_sandwich_matches_the_scatter():
+    """`_joint._sandwich`: with the columns corrected for the noise of v, the residual holds 30 v^2 e, largest
+    where |v| is (and v^3 has its leverage), so sigma^2 A^-1 understates the v^3 coefficient's variance; the
+    corrected score's sandwich gives the scatter over draws (within its sampling error), the plain form not."""
+    from gmr_jax._coordination._joint import _Layout, _sandwich, _velocity_gram, _velocity_noise
+
+    rng = np.random.default_rng(3)
+    n = 6000
+    t = np.arange(n) / 200.0
+    ph = 2 * np.pi * np.cumsum(0.5 + 2.0 * t / t[-1]) / 200.0
+    v = ((1.0 + 2.0 * np.exp(-(((0.5 + 2.0 * t / t[-1]) - 1.3) / 0.2) ** 2)) * np.sin(ph))[None, :]
+    u = 0.2 * np.cos(ph)[None, :]
+    layout = _Layout(1, 0, (3,))  # T0, T1(u), C(0) v, v^3
+    s2 = (0.1 * np.std(v)) ** 2
+    w = np.ones((1, n))
+    est, se_sw, se_plain = [], [], []
+    for _ in range(40):
+        vn = v + np.sqrt(s2) * rng.standard_normal(v.shape)
+        y = 10.0 * v**3 + 0.5 * rng.standard_normal(v.shape)
+        cols = np.asarray(layout.columns(jnp.asarray(u), jnp.asarray(vn)))
+        cols, vd = _velocity_noise(cols, u, vn, np.array([s2]), layout)
+        scale = np.ones(layout.p)
+        gram = np.einsum("wn,wnp,wnq->pq", w, cols, cols)
+        gram, noise = _velocity_gram(gram, vd, np.array([s2]), w, None, scale)
+        ainv = np.linalg.inv(gram)
+        theta = ainv @ np.einsum("wn,wnp,wn->p", w, cols, y)
+        sigma2 = float(np.sum((y - cols @ theta) ** 2) / (n - layout.p))
+        cov = _sandwich(cols, y, w, theta, ainv, np.ones(layout.p, bool), gram, noise, sigma2)
+        est.append(theta[-1]), se_sw.append(np.sqrt(cov[-1, -1])), se_plain.append(np.sqrt(sigma2 * ainv[-1, -1]))
+    scatter = np.std(est, ddof=1)  # its own sampling error: about 11 % over 40 draws
+    assert abs(np.mean(se_sw) / scatter - 1.0) < 0.3, (np.mean(se_sw), scatter)
+    assert np.mean(se_plain) / scatter < 0.75, (np.mean(se_plain), scatter)  # the plain form: too narrow
+    assert abs(np.mean(est) - 10.0) < 4 * scatter / np.sqrt(len(est))
