@@ -654,6 +654,14 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
     return coord, route, why + lowered, paper_sound, confining, warnings
 
 
+def _v_noise_report(v_noise, route: str, segs, gain) -> list[dict | None]:
+    """Per well, the joint regression's correction for the noise on a measured v
+    (`_joint._velocity_noise`): the noise's sd and whether it was applied (the joint regression ran,
+    on columns of the measured v, every well with a white floor). None: not applicable."""
+    applied = ("joint" in route and segs is None and gain is None and all(s is not None for s in v_noise))
+    return [None if s is None else {"noise_sd": float(np.sqrt(s)), "applied": bool(applied)} for s in v_noise]
+
+
 def _eiv_report(x_noise, xs, w, applied) -> list[dict | None]:
     """Per well, the errors-in-variables correction of its local fit: the noise on x (sd, and
     relative to the sd of the vibration) and whether it was applied (None: not applicable)."""
@@ -752,7 +760,7 @@ def reconstruct(
     shared_design: bool | None = None,
     structured_noise: bool | None = None,
     errors_in_variables: bool = True,
-    velocity_eiv: bool = False,
+    velocity_eiv: bool = True,
     throw: bool = True,
     progress: Callable[[str], None] | None = None,
 ) -> Solution:
@@ -859,10 +867,13 @@ def reconstruct(
       Reported per well in `dofs[i].stats["errors_in_variables"]`; False: plain least squares.
     - `velocity_eiv`: the joint regression (route "joint", "gls + joint damping") corrects its
       velocity columns for the white noise on a measured v (`_joint._velocity_noise`; not where v
-      is estimated, x integrated from v or a estimated from v). Off by default for now: bistable
-      joint (10 v^3), 5 degrees, 30 dB, 4 seeds, v^3 9.28-9.49 -> 9.90-10.04 and the magnet's damping
-      band at 40 dB holds the truth on 100 % of its span instead of 60 %, but the correction's own
-      uncertainty is not yet in the band (the joint at seed 4: 80 -> 30 %, `studies/velocity_noise.py`).
+      is estimated, x integrated from v or a estimated from v), and its covariance for the
+      residual that noise leaves, largest where |v| is (`_joint._sandwich`, never narrower than
+      sigma^2 A^-1). Bistable joint (10 v^3), 5 degrees, 30 dB, 4 seeds: v^3 9.28-9.49 (7-10
+      standard errors low) -> 9.90-10.04 (within 1.7); the magnet's damping band at 40 dB holds the
+      truth on 100 % of its span instead of 60 % (`studies/velocity_noise.py`, `studies/coverage.py`).
+      Reported per well in `dofs[i].stats["velocity_noise"]`; False: the velocity columns taken
+      as measured.
     - `throw`: raise `GMRComputationError` on a numerical failure (a local fit or the
       coordination); with False, read `result` (the model then holds NaN where it failed).
     - `progress`: called with a short sentence at each stage (per DOF: local fits,
@@ -1072,6 +1083,7 @@ def reconstruct(
             | {"dropped_velocity_damping": dropped, "negative_friction_dropped": at_rest,
                "damping_orders_added": damping_added,
                "restoring_orders_added": added, "errors_in_variables": eiv, "coordination": route,
+               "velocity_noise": _v_noise_report(v_noises[i], route, segs_all[i], gains[i]),
                "paper_route_rejected": why, "shared_design": _design_stats(design, i, borrowed, design_why, coord),
                "escapes": _sanity.escapes(np.asarray(g.stiffness), eq)},
         ))
