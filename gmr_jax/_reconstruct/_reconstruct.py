@@ -47,6 +47,7 @@ from ._filter_gain import apply_gain, gain_segments, matched_target
 from ._local_rules import (
     _dissipative_at_rest,
     _extend_damping,
+    _extend_position_damping,
     _extend_restoring,
     _fit_wells,
     _one_of_a_group,
@@ -978,12 +979,17 @@ def reconstruct(
         if _local_rules.EXTEND_DAMPING and screen_sigma is not None:
             fits, damping_added = _extend_damping(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
                                                   noise, x_noise, band)
+        position_added = [[] for _ in groups]
+        if _local_rules.EXTEND_POSITION_DAMPING and screen_sigma is not None:
+            fits, position_added = _extend_position_damping(fits, xs, vs, ys, w, library, solver, screen_sigma, i,
+                                                            failure, noise, x_noise, band)
         added = [[] for _ in groups]
         if extend_restoring and screen_sigma is not None:
             fill = extend_upto == 2 and _local_rules.FILL_CURVATURE  # F'' whatever its t (`FILL_CURVATURE`)
             fits, added = _extend_restoring(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure, noise,
                                             x_noise, extend_upto, band, fill=fill)
-        local.append((labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band, at_rest, damping_added))
+        local.append((labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band, at_rest, damping_added,
+                      position_added))
         # estimated accelerations: the joint regression on low-passed rows (`row_filter`; shallow arch, x only,
         # 30 dB, 0.45 % sweeps, seeds 0-1: 8.31/8.81 % on raw rows, degree 13; 1.35/6.11 % filtered, degree 7)
         segs_all.append(segs)
@@ -999,7 +1005,7 @@ def reconstruct(
         plan, design = _shape_prior.share_curvature([loc[6] for loc in local], library,
                                                     screen_sigma if screen_sigma is not None else 3.0)
     for i in range(d):
-        labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band, at_rest, damping_added = local[i]
+        labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band, at_rest, damping_added, position_added = local[i]
         data_fits = fits  # the local fits from the data alone (reported; the resolution report reads them)
         borrowed, design_why = [], None
         if plan[i] is not None:
@@ -1081,7 +1087,7 @@ def reconstruct(
             recordings_per_well=[[recs[k].name for k in g] for g in groups],
             stats={k: np.asarray(v).tolist() for k, v in coord.stats.items()}
             | {"dropped_velocity_damping": dropped, "negative_friction_dropped": at_rest,
-               "damping_orders_added": damping_added,
+               "damping_orders_added": damping_added, "position_damping_orders_added": position_added,
                "restoring_orders_added": added, "errors_in_variables": eiv, "coordination": route,
                "velocity_noise": _v_noise_report(v_noises[i], route, segs_all[i], gains[i]),
                "paper_route_rejected": why, "shared_design": _design_stats(design, i, borrowed, design_why, coord),
