@@ -954,6 +954,7 @@ def reconstruct(
                                                for k in g] for g in groups])[0]))
         sols = jax.device_get(_fit_wells(xs, vs, ys, w, library, solver, select, keep, noise, x_noise, band))
         fits: LocalFit = sols.value
+        fitted = fits  # before the t-screen (`_extend_position_damping` refits beside its zeroed restoring terms)
         eiv = _eiv_report(x_noise, xs, w, sols.stats.get("eiv_applied"))
         if screen_sigma is not None:
             screened = _screen(fits, screen_sigma, library)
@@ -982,7 +983,7 @@ def reconstruct(
         position_added = [[] for _ in groups]
         if _local_rules.EXTEND_POSITION_DAMPING and screen_sigma is not None:
             fits, position_added = _extend_position_damping(fits, xs, vs, ys, w, library, solver, screen_sigma, i,
-                                                            failure, noise, x_noise, band)
+                                                            failure, noise, x_noise, band, fitted=fitted)
         added = [[] for _ in groups]
         if extend_restoring and screen_sigma is not None:
             fill = extend_upto == 2 and _local_rules.FILL_CURVATURE  # F'' whatever its t (`FILL_CURVATURE`)
