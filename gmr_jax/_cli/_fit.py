@@ -38,6 +38,9 @@ def register(sub):
     f.add_argument("--no-eiv", action="store_true",
                    help="plain least squares in the local fits (by default, where x is measured with the "
                    "accelerations, they are corrected for the noise on x: errors in variables)")
+    f.add_argument("--no-velocity-eiv", action="store_true",
+                   help="take a measured v as exact in the joint regression (by default its damping columns are "
+                   "corrected for the noise on v, which otherwise attenuates v^3 and leaks it into v)")
     f.add_argument("--structured-noise", action=argparse.BooleanOptionalAction, default=None,
                    help="where accelerations are estimated (x only, v only, x and v): take their noise for what it "
                    "is (the differentiation filter's) and resolve the curvature at each well (default: on where x "
@@ -91,6 +94,8 @@ def coordination_of(stats: dict) -> list[dict]:
         row = {"route": str(route), "notes": [str(n) for n in rep.stats.get("paper_route_rejected", [])]}
         if any(rep.stats.get("errors_in_variables") or []):
             row["errors_in_variables"] = rep.stats["errors_in_variables"]
+        if any(w and w.get("applied") for w in rep.stats.get("velocity_noise") or []):
+            row["velocity_noise"] = rep.stats["velocity_noise"]
         rows.append(row)
     return rows
 
@@ -137,6 +142,8 @@ def run(args) -> int:
             kwargs["shared_design"] = False
         if args.no_eiv:
             kwargs["errors_in_variables"] = False
+        if args.no_velocity_eiv:
+            kwargs["velocity_eiv"] = False
         if args.structured_noise is not None:
             kwargs["structured_noise"] = args.structured_noise
         kwargs["progress"] = lambda msg: stage(f"gmr: {msg}")

@@ -34,7 +34,8 @@ def format_coordination(routes: list[dict]) -> list[str]:
 
 def format_eiv(routes: list[dict]) -> list[str]:
     """`gmr fit`/`gmr show`: per DOF whose local fits were corrected for the noise on x (errors in
-    variables; the `errors_in_variables` of its coordination entry), how loud that noise was."""
+    variables; the `errors_in_variables` of its coordination entry), how loud that noise was; and
+    whose joint regression was corrected for the noise on a measured v (`velocity_noise`)."""
     lines = []
     for i, r in enumerate(routes):
         wells = [w for w in ((r.get("errors_in_variables") or []) if isinstance(r, dict) else [])
@@ -44,6 +45,12 @@ def format_eiv(routes: list[dict]) -> list[str]:
             lines.append(f"  DOF {i}: local fits corrected for the noise on x (errors in variables; its sd "
                          f"{min(rel):.2g}-{max(rel):.2g} % of the vibration at {len(wells)} well(s); --no-eiv: "
                          "plain least squares)")
+        vel = [w for w in ((r.get("velocity_noise") or []) if isinstance(r, dict) else [])
+               if isinstance(w, dict) and w.get("applied")]
+        if vel:
+            sd = [float(w.get("noise_sd", float("nan"))) for w in vel]
+            lines.append(f"  DOF {i}: joint regression's damping corrected for the noise on v (sd {min(sd):.3g}-"
+                         f"{max(sd):.3g} at {len(vel)} well(s); --no-velocity-eiv: v taken as exact)")
     return lines
 
 
