@@ -145,7 +145,7 @@ def measure(model, system, i, n=401):
     return out
 
 
-#: extra `reconstruct` keywords (`--velocity-eiv`)
+#: extra `reconstruct` keywords (`--no-velocity-eiv`)
 OPTIONS: dict = {}
 
 
@@ -211,10 +211,11 @@ def main():
     p.add_argument("--quick", action="store_true")
     p.add_argument("--basins", action="store_true")
     p.add_argument("--out", default=None)
-    p.add_argument("--velocity-eiv", action="store_true", help="reconstruct(velocity_eiv=True)")
+    p.add_argument("--no-velocity-eiv", action="store_true",
+                   help="reconstruct(velocity_eiv=False): a measured v taken as exact (the default before stop 46)")
     args = p.parse_args()
-    if args.velocity_eiv:
-        OPTIONS["velocity_eiv"] = True
+    if args.no_velocity_eiv:
+        OPTIONS["velocity_eiv"] = False
     cases = [CASES[k] for k in QUICK] if args.quick else CASES
     out = Path(args.out or RESULTS / ("coverage_quick.md" if args.quick else "coverage.md"))
     cmd = "python studies/coverage.py" + " ".join([""] + sys.argv[1:])
@@ -226,7 +227,7 @@ def main():
         rows += got
     lines = [
         "# Coverage of the global model's 95 % band", "",
-        f"Command: `{cmd}` (module docstring: definitions). `reconstruct` defaults{' and velocity_eiv=True' if args.velocity_eiv else ''} (library orders "
+        f"Command: `{cmd}` (module docstring: definitions). `reconstruct` defaults{' and velocity_eiv=False' if args.no_velocity_eiv else ''} (library orders "
         f"`system.orders['gmr']`), `force_band(level=0.95)` from `GlobalModel.covariance`.", "",
         "Columns: coverage of F_r,true by the 95 % band on the interwell span (target >= 90 %) and on the "
         "error box; the band's median full width on the span relative to max |F_r,true| there; the model's "
