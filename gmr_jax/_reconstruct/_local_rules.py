@@ -221,11 +221,18 @@ def _refit_on(xs, vs, ys, w, library, solver, fits, k: int, mask, noise=None, x_
                                     noise=at(noise), x_noise=at(x_noise), band=at(band), throw=False))
 
 
-def _refit_with(xs, vs, ys, w, library, solver, fits, k: int, support, j: int, noise=None, x_noise=None, band=None):
+def _refit_with(xs, vs, ys, w, library, solver, fits, k: int, support, j: int, noise=None, x_noise=None, band=None,
+                fitted=None):
     """Well `k` refitted on the nonzero terms of `support` (a coefficient row) plus term `j` (`_refit_on`): the
-    Solution, whether it succeeded, and term j's coefficient and variance."""
+    Solution, whether it succeeded, and term j's coefficient and variance. `fitted`: the fits before the t-screen
+    (`_screen`), whose restoring terms at well k the refit holds too, for the caller to screen again: the screen
+    zeroes a term without a refit, so the others keep the values fitted beside it, and a refit without it moves
+    them by its omission (bistable joint, 50 x^2 v, 1 degree, 60 dB, seed 0: q^3 at t < 3 zeroed; refitted
+    without it, F' 3.8 of its then standard errors high, the restoring error 0.0024 -> 0.010 %)."""
     mask = with_constant(np.asarray(support) != 0, library)
     mask[j] = True
+    if fitted is not None:
+        mask |= np.array([phys == STIFFNESS for phys, _ in library.terms()]) & (np.asarray(fitted.coef[k]) != 0)
     sol = _refit_on(xs, vs, ys, w, library, solver, fits, k, mask, noise, x_noise, band)
     ok = int(sol.result._value) == int(RESULTS.successful._value)
     return sol, ok, float(np.asarray(sol.value.coef)[j]), float(np.asarray(sol.value.covariance)[j, j])
@@ -402,18 +409,13 @@ def _extend_position_damping(fits, xs, vs, ys, w, library, solver, n_sigma, dof,
     the coordination takes as the damping's value at the well. 3-cell Kresling chain, 0.3 mm sweeps, 60 dB, seed
     0, cell 2: q^2 v at t = 10.5 and 13.3 at the wells, dropped; the viscous value 6e-5 (8 standard errors) high
     at both, and the damping band held the truth on 85 % of the span. Each well that keeps a damping term is
-    refitted on its support plus q^(j+1) v (`_refit_on`, the support kept); the term stays where the refit
-    resolves it (|t| >= `n_sigma`), and the next order is tried, up to the library's damping order. `fitted`: the
-    fits before the t-screen (`_screen`), whose restoring terms the refit holds too and screens again: the screen
-    zeroes a term without a refit, so the others keep the values fitted beside it, and a refit without it moves
-    them by its omission (bistable joint, 50 x^2 v, 1 degree, 60 dB, seed 0: q^3 at t < 3 dropped, F' 3.8 of its
-    then standard errors high; the restoring error 0.0024 -> 0.010 %). Returns the fits and, per well, the orders
-    added."""
+    refitted on its support plus q^(j+1) v (`_refit_with`, beside the restoring terms the t-screen zeroed,
+    `fitted`; the support kept); the term stays where the refit resolves it (|t| >= `n_sigma`), and the next order
+    is tried, up to the library's damping order. Returns the fits and, per well, the orders added."""
     terms = library.terms()
     idx = [terms.index((POSITION_DAMPING, j)) if (POSITION_DAMPING, j) in terms else None
            for j in range(1, library.damping_order + 1)]
     damping = np.array([phys != STIFFNESS for phys, _ in terms])
-    restoring = ~damping
     added = [[] for _ in range(xs.shape[0])]
     if n_sigma is None or not idx or idx[0] is None:
         return fits, added
@@ -425,14 +427,11 @@ def _extend_position_damping(fits, xs, vs, ys, w, library, solver, n_sigma, dof,
             top = max([j + 1 for j, i in enumerate(idx) if i is not None and coef[i] != 0], default=0)
             if top >= len(idx) or idx[top] is None:
                 break
-            mask = with_constant(coef != 0, library)
-            mask[idx[top]] = True
-            kept = mask.copy()
-            if fitted is not None:
-                mask |= restoring & (np.asarray(fitted.coef[k]) != 0)
-            sol = _refit_on(xs, vs, ys, w, library, solver, fits, k, mask, noise, x_noise, band)
-            c, var = float(np.asarray(sol.value.coef)[idx[top]]), float(np.asarray(sol.value.covariance)[idx[top], idx[top]])
-            if int(sol.result._value) != int(RESULTS.successful._value) or not (var > 0 and abs(c) >= n_sigma * np.sqrt(var)):
+            kept = with_constant(coef != 0, library)
+            kept[idx[top]] = True
+            sol, ok, c, var = _refit_with(xs, vs, ys, w, library, solver, fits, k, coef, idx[top], noise, x_noise,
+                                          band, fitted)
+            if not ok or not (var > 0 and abs(c) >= n_sigma * np.sqrt(var)):
                 break
             fits = _set_well(fits, k, _screen(_as_well(sol.value), n_sigma, library, exempt=kept))
             added[k].append(top + 1)
