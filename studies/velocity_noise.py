@@ -21,21 +21,36 @@ import argparse
 import time
 import warnings
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 import gmr_jax as g
 
 
-def fit(recs, clean, system, v_clean: bool, velocity_eiv: bool = False):
+def damping_coverage(model, system, level=0.95):
+    """Share of the wells' span x v_range (41 x 40 points, v != 0) where the model's 95 % damping band holds the
+    truth's damping force (as `studies/coverage.py` measures it)."""
+    eq = system.equilibria[:, 0]
+    vs = np.linspace(*system.v_range[0], 41)
+    xx, vv = (a.ravel() for a in np.meshgrid(np.linspace(eq.min(), eq.max(), 41), vs[vs != 0], indexing="ij"))
+    x, v = jnp.asarray(xx)[:, None], jnp.asarray(vv)[:, None]
+    band = jax.vmap(lambda p, q: g.force_band(model, p, q, part="damping", level=level))(x, v)
+    truth = np.asarray(jax.vmap(system.truth.damping)(x, v))[:, 0]
+    return float(np.mean((truth >= np.asarray(band.lower)[:, 0]) & (truth <= np.asarray(band.upper)[:, 0])))
+
+
+def fit(recs, clean, system, v_clean: bool, velocity_eiv: bool = False, coordination: str = "joint"):
     rr = [g.Recording(t=r.t, x=r.x, v=(c.v if v_clean else r.v), a=r.a, base_acc=r.base_acc, masses=r.masses,
                       name=r.name) for r, c in zip(recs, clean)]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        sol = g.reconstruct(rr, g.Library(*system.orders["gmr"]), throw=False, coordination="joint",
+        sol = g.reconstruct(rr, g.Library(*system.orders["gmr"]), throw=False, coordination=coordination,
                             velocity_eiv=velocity_eiv)
     m = sol.value
     return (np.asarray(m.velocity_damping[0], float), np.asarray(m.stderr["velocity_damping"][0], float),
-            sol.stats["dofs"][0].stats.get("joint_velocity_orders"))
+            sol.stats["dofs"][0].stats.get("joint_velocity_orders"), damping_coverage(m, system),
+            sol.stats["dofs"][0].stats["coordination"])
 
 
 def main():
@@ -47,31 +62,47 @@ def main():
     t0 = time.time()
     s = g.systems.bistable_joint("position_independent")
     amp = np.deg2rad(5.0)
-    rows = []
+    rows, auto = [], []
     for seed in range(args.seeds):
         recs = g.systems.make_recordings(s, amp, snr_db=args.snr, seed=seed)
         clean = g.systems.make_recordings(s, amp, snr_db=None, seed=seed)
         for v_clean, eiv, mode in ((False, False, "as recorded, `velocity_eiv=False`"),
                                    (False, True, "as recorded, `velocity_eiv=True` (default)"), (True, False, "noise-free")):
-            b, se, orders = fit(recs, clean, s, v_clean, eiv)
-            rows.append((seed, mode, b, se, orders))
-            print(rows[-1][:2], b[:4], se[:4], orders, flush=True)
+            b, se, orders, cover, _ = fit(recs, clean, s, v_clean, eiv)
+            rows.append((seed, mode, b, se, orders, cover))
+            print(rows[-1][:2], b[:4], se[:4], orders, cover, flush=True)
+        for eiv in (False, True):  # reconstruct's defaults (route "auto"), as the coverage study
+            *_, cover, route = fit(recs, clean, s, False, eiv, coordination="auto")
+            auto.append((seed, eiv, cover, route))
+            print(auto[-1], flush=True)
     lines = ["# Noise on v and the damping law (issue 15)", "",
              (f"`python studies/velocity_noise.py --seeds {args.seeds}` ({(time.time() - t0) / 60:.1f} min on the "
               "shared 2-core dev machine)."), "", __doc__.split("\n\n    python")[0].split("\n\n", 1)[1], "",
              f"Truth: 10 v^3. Bistable joint, position-independent damping, base amplitude 5 degrees, {args.snr:g} dB.", "",
-             "| seed | v | velocity orders chosen | v coefficient (se) | v^3 coefficient (se) | v^3 error / se |",
-             "|---|---|---|---|---|---|"]
-    for seed, mode, b, se, orders in rows:
+             "Coordination forced to the joint regression (`coordination=\"joint\"`); damping band: the share of the "
+             "wells' span x v_range where the 95 % band of the damping force holds the truth's (target >= 90 %).", "",
+             "| seed | v | velocity orders chosen | v coefficient (se) | v^3 coefficient (se) | v^3 error / se | damping band |",
+             "|---|---|---|---|---|---|---|"]
+    for seed, mode, b, se, orders, cover in rows:
         lines.append(f"| {seed} | {mode} | {orders} | {b[1]:.4g} ({se[1]:.3g}) | {b[3]:.5g} ({se[3]:.3g}) | "
-                     f"{(b[3] - 10.0) / se[3]:+.2f} |")
+                     f"{(b[3] - 10.0) / se[3]:+.2f} | {cover:.1%} |")
     lines += ["", "Per mode over the seeds: the RMS of (v^3 - 10) / se (1 for calibrated standard errors) and the share "
               "of seeds whose v^3 lies within 1.96 se of 10 (95 % for a calibrated band).", "",
               "| v | RMS of (v^3 error) / se | within 1.96 se |", "|---|---|---|"]
     for mode in dict.fromkeys(r[1] for r in rows):
-        z = np.array([(b[3] - 10.0) / se[3] for _, m, b, se, _ in rows if m == mode])
+        z = np.array([(b[3] - 10.0) / se[3] for _, m, b, se, *_ in rows if m == mode])
         lines.append(f"| {mode} | {np.sqrt(np.mean(z**2)):.2f} | {np.mean(np.abs(z) <= 1.96):.0%} ({int(np.sum(np.abs(z) <= 1.96))}"
                      f" of {z.size}) |")
+    lines += ["", "With `reconstruct`'s defaults (route \"auto\", as in `studies/coverage.py`): the damping band per seed.",
+              "", "| seed | route | `velocity_eiv=False` | `velocity_eiv=True` (default) |", "|---|---|---|---|"]
+    for seed in range(args.seeds):
+        (_, _, c0, r0), (_, _, c1, r1) = [a for a in auto if a[0] == seed]
+        lines.append(f"| {seed} | {r1}{'' if r0 == r1 else f' ({r0} without)'} | {c0:.1%} | {c1:.1%} |")
+    cells = []
+    for eiv in (False, True):
+        c = np.array([a[2] for a in auto if a[1] == eiv])
+        cells.append(f"{int(np.sum(c >= 0.9))} of {c.size} >= 90 %, median {np.median(c):.1%}")
+    lines.append(f"| all | | {cells[0]} | {cells[1]} |")
     with open(args.out, "w") as fh:
         fh.write("\n".join(lines) + "\n")
     print("\n".join(lines))
