@@ -311,6 +311,7 @@ def test_fit_structured_noise_flag_reaches_reconstruct(monkeypatch, tmp_path):
         assert seen[-1] == expected, (flags, seen)
 
 
+@pytest.mark.slow  # two gmr fit runs on 8 s sweeps (~8 s)
 def test_fit_corrects_the_joint_damping_for_the_noise_on_a_measured_v(tmp_path, capsys):
     """x, v, a measured at 30 dB, 5 degree sweeps (the joint regression fits the damping): its velocity columns
     are corrected for the noise on v (said, and kept per well in the model file's coordination entries, the

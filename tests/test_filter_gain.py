@@ -37,6 +37,7 @@ def test_filter_gain_is_what_savitzky_golay_did_to_the_derivative(order, window)
     assert np.allclose(cols[:, 0], 1.0) and np.allclose(cols[:, 1], through)
 
 
+@pytest.mark.slow  # two reconstructions of displacement-only sweeps (~17 s)
 def test_displacement_only_sweeps_keep_the_true_damping_law():
     """Bistable joint (position-independent v^3 damping), x only, 40 dB, 0.5 degree sweeps, seed 5:
     on the raw columns the filter's shortfall on the third harmonic of v^3 read as a linear v and

@@ -4,6 +4,7 @@ scatter over noise draws). Issue 15."""
 
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import gmr_jax as gmr
 from gmr_jax._fit._library import Library
@@ -95,6 +96,7 @@ def test_the_local_stiffness_from_x_alone_is_unbiased_and_its_interval_calibrate
 
 
 
+@pytest.mark.slow  # reconstructions with and without the structured noise (~16 s)
 def test_reconstruct_with_structured_noise_gives_intervals_that_hold_the_truth(monkeypatch):
     """Shallow arch, x only, 30 dB: the OLS intervals of the local stiffness are ~20 times too
     wide; with `structured_noise` each holds the truth's exact F' within 3 of its (far smaller)
