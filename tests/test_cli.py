@@ -82,10 +82,7 @@ def test_fit_corrects_for_the_noise_on_a_measured_x(tmp_path, capsys):
     never corrected (its accelerations carry the noise of x)."""
     s = g.systems.bistable_joint("position_independent")
     recs = g.systems.make_recordings(s, np.deg2rad(1.0), snr_db=30.0, seed=3, duration=5.0)
-    paths = []
-    for r in recs:
-        paths.append(str(tmp_path / f"{r.name}.npz"))
-        r.save(paths[-1])
+    paths = _saved(recs, tmp_path)
     out, plain = tmp_path / "m.json", tmp_path / "plain.json"
     assert main(["fit", *paths, "--out", str(out), "--no-figure"]) == 0
     printed = capsys.readouterr().out
@@ -117,6 +114,14 @@ def test_fit_manual_threshold_and_baseline(joint_files, tmp_path):
     a, b = (json.loads((tmp_path / n).read_text()) for n in ("a.json", "b.json"))
     assert a["method"] != b["method"] and "sindy" in b["method"].lower(), (a["method"], b["method"])
     assert b["library"] == {"r": 7, "d": 7}
+
+
+def _saved(recs, tmp_path) -> list[str]:
+    """Each recording saved as `<name>.npz` under `tmp_path` (`Recording.save`); their paths."""
+    paths = [str(tmp_path / f"{r.name}.npz") for r in recs]
+    for r, p in zip(recs, paths):
+        r.save(p)
+    return paths
 
 
 def _bad(tmp_path, name, **arrays):
@@ -318,10 +323,7 @@ def test_fit_corrects_the_joint_damping_for_the_noise_on_a_measured_v(tmp_path, 
     noise's sd as make_recordings added it); `--no-velocity-eiv` takes v as exact."""
     s = g.systems.bistable_joint("position_independent")
     recs = g.systems.make_recordings(s, np.deg2rad(5.0), snr_db=30.0, seed=4)
-    paths = []
-    for r in recs:
-        paths.append(str(tmp_path / f"{r.name}.npz"))
-        r.save(paths[-1])
+    paths = _saved(recs, tmp_path)
     out, plain = tmp_path / "m.json", tmp_path / "plain.json"
     assert main(["fit", *paths, "--out", str(out), "--no-figure"]) == 0
     assert "corrected for the noise on v" in capsys.readouterr().out

@@ -475,7 +475,7 @@ def joint_coordinate(
     and its damping coefficients less the chosen ones, None / inf / zeros when there is none: rule 14 of
     `reconstruct`'s checks; `joint_truncation_ratio`, `_tail`: where the chosen degree is the cap, the series'
     convergence ratio and the RMS of its estimated tail on the span, whose covariance the returned one holds
-    (`_truncation`), 0 elsewhere). `refine`: on a conflict, search once more on the penalty grid
+    (`_truncation`), 0 elsewhere; `joint_velocity_noise`: whether the columns were corrected for `v_noise`). `refine`: on a conflict, search once more on the penalty grid
     refined to half decades (module docstring). `x_noise`: per well, the variance of white noise
     on the measured x; the normal equations are then corrected for it (errors in variables, the
     corrected score of `_fit/_errors_in_variables.py`, each power of u replaced by its Hermite
@@ -639,7 +639,8 @@ def joint_coordinate(
              "joint_damping_alternative_delta": np.inf if alt_d is None else float(bic[alt_d] - bic[best]),
              "joint_damping_alternative_velocity": damping_alt[off_v:off_p].tolist(),
              "joint_damping_alternative_position": damping_alt[off_p:].tolist(),
-             "joint_truncation_ratio": ratio, "joint_truncation_tail": tail}
+             "joint_truncation_ratio": ratio, "joint_truncation_tail": tail,
+             "joint_velocity_noise": v_rows is not None}
     return (flat[: layout.k + 1], flat[off_v:off_p], flat[off_p:], cov, stats)
 
 

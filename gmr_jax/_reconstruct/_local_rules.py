@@ -451,20 +451,3 @@ def _extend_position_damping(fits, xs, vs, ys, w, library, solver, n_sigma, dof,
         for k in tried:
             added[k].append(order + 1)
     return fits, added
-    for k in range(xs.shape[0]):
-        while True:
-            coef = np.asarray(fits.coef[k])
-            if not np.any(coef[damping] != 0):
-                break
-            top = max([j + 1 for j, i in enumerate(idx) if i is not None and coef[i] != 0], default=0)
-            if top >= len(idx) or idx[top] is None:
-                break
-            kept = with_constant(coef != 0, library)
-            kept[idx[top]] = True
-            sol, ok, c, var = _refit_with(xs, vs, ys, w, library, solver, fits, k, coef, idx[top], noise, x_noise,
-                                          band, fitted)
-            if not ok or not (var > 0 and abs(c) >= n_sigma * np.sqrt(var)):
-                break
-            fits = _set_well(fits, k, _screen(_as_well(sol.value), n_sigma, library, exempt=kept))
-            added[k].append(top + 1)
-    return fits, added

@@ -655,11 +655,10 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
     return coord, route, why + lowered, paper_sound, confining, warnings
 
 
-def _v_noise_report(v_noise, route: str, segs, gain) -> list[dict | None]:
+def _v_noise_report(v_noise, applied: bool) -> list[dict | None]:
     """Per well, the joint regression's correction for the noise on a measured v
-    (`_joint._velocity_noise`): the noise's sd and whether it was applied (the joint regression ran,
-    on columns of the measured v, every well with a white floor). None: not applicable."""
-    applied = ("joint" in route and segs is None and gain is None and all(s is not None for s in v_noise))
+    (`_joint._velocity_noise`): the noise's sd and whether it was applied (the coordination's
+    `joint_velocity_noise`). None: not applicable."""
     return [None if s is None else {"noise_sd": float(np.sqrt(s)), "applied": bool(applied)} for s in v_noise]
 
 
@@ -1090,7 +1089,7 @@ def reconstruct(
             | {"dropped_velocity_damping": dropped, "negative_friction_dropped": at_rest,
                "damping_orders_added": damping_added, "position_damping_orders_added": position_added,
                "restoring_orders_added": added, "errors_in_variables": eiv, "coordination": route,
-               "velocity_noise": _v_noise_report(v_noises[i], route, segs_all[i], gains[i]),
+               "velocity_noise": _v_noise_report(v_noises[i], coord.stats.get("joint_velocity_noise", False)),
                "paper_route_rejected": why, "shared_design": _design_stats(design, i, borrowed, design_why, coord),
                "escapes": _sanity.escapes(np.asarray(g.stiffness), eq)},
         ))
