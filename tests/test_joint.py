@@ -491,3 +491,50 @@ def test_velocity_noise_sandwich_matches_the_scatter():
     assert abs(np.mean(se_sw) / scatter - 1.0) < 0.3, (np.mean(se_sw), scatter)
     assert np.mean(se_plain) / scatter < 0.75, (np.mean(se_plain), scatter)  # the plain form: too narrow
     assert abs(np.mean(est) - 10.0) < 4 * scatter / np.sqrt(len(est))
+
+
+@pytest.mark.slow  # one reconstruction to capture the regression's inputs, then 40 x 2 joint regressions (~20 s)
+def test_a_velocity_term_is_kept_on_its_robust_covariance(monkeypatch):
+    """`_joint._robust_velocity_set`: with the columns corrected for the noise of v, the score judges a velocity
+    term on sigma^2 A^-1, several times too narrow where the residual grows with |v|, and keeps a v|v| beside the
+    truth's v^3 in a quarter of the draws (10 of 40 on the full candidate set), pulling the viscous term negative; re-tested on the sandwich it is
+    dropped, and the viscous term is unbiased (bistable joint, 10 v^3, 5 degrees, 30 dB on v, seed 4's sweeps with
+    fresh draws of v's noise)."""
+    import gmr_jax._reconstruct._reconstruct as recon
+    from gmr_jax._coordination import _joint
+
+    s = g.systems.bistable_joint("position_independent")
+    recs = g.systems.make_recordings(s, np.deg2rad(5.0), snr_db=30.0, seed=4)
+    clean = g.systems.make_recordings(s, np.deg2rad(5.0), snr_db=None, seed=4)
+    noisy = [g.Recording(t=c.t, x=c.x, v=r.v, a=c.a, base_acc=c.base_acc, masses=c.masses, name=c.name)
+             for r, c in zip(recs, clean)]
+    captured = []
+
+    def spy(*args, **kwargs):
+        captured.append((args, kwargs))
+        return _joint.joint_coordinate(*args, **kwargs)
+
+    monkeypatch.setattr(recon, "joint_coordinate", spy)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        g.reconstruct(noisy, g.Library(*s.orders["gmr"]), throw=False, coordination="joint")
+    (xs, vs, ys, weights, eq, var, speed, _), kwargs = captured[-1]
+    v_clean = np.zeros_like(np.asarray(vs))
+    for i, c in enumerate(clean):
+        v_clean[i, : c.n_samples] = c.v[:, 0]
+    sd = np.array([np.std((np.asarray(vs) - v_clean)[i][np.asarray(weights)[i] > 0]) for i in range(len(clean))])
+    settings = _joint.JointSettings(max_degree=3, max_damping_degree=0, velocity_orders=(2, 3))
+    rng = np.random.default_rng(777)
+    kept, linear = {True: 0, False: 0}, {True: [], False: []}
+    for _ in range(40):
+        v = (v_clean + sd[:, None] * rng.standard_normal(v_clean.shape)) * (np.asarray(weights) > 0)
+        for on in (True, False):
+            monkeypatch.setattr(_joint, "ROBUST_VELOCITY_SET", on)
+            _, vdamp, _, _, stats = _joint.joint_coordinate(xs, v, ys, weights, eq, var, speed, settings,
+                                                            v_noise=kwargs["v_noise"])
+            assert stats["joint_velocity_noise"]
+            kept[on] += 2 in stats["joint_velocity_orders"]
+            linear[on].append(float(vdamp[1]))
+    mean, se = np.mean(linear[True]), np.std(linear[True], ddof=1) / np.sqrt(40)
+    assert kept[True] <= 1 and abs(mean) < 3 * se, (kept, mean, se)
+    assert kept[False] >= 5 and np.mean(linear[False]) < mean, (kept, linear)  # the score alone: the test has teeth

@@ -74,9 +74,10 @@ DISSIPATION_TOLERANCE = 1e-3
 SANDWICH = True
 #: ... and the velocity terms the score keeps are tested again against it (`_robust_velocity_set`): the score's
 #: Gaussian likelihood takes the residual as uniform, so where the noise of v makes it grow with |v| a term is
-#: judged on a variance several times too small (bistable joint, 10 v^3, 5 degrees, 30 dB, seed 4, 40 fresh draws of
-#: v's noise: v|v| beside v^3 in 10 of 40, by 1-9 in the score, its coefficient 0.26-1.34 and the viscous one pulled
-#: to -1.12 on average; the linear term's mean -0.30 +- 0.07 for the truth's 0)
+#: judged on a variance several times too small (bistable joint, 10 v^3, 5 degrees, 30 dB, seed 4's sweeps, 40 fresh
+#: draws of v's noise, joint route: v|v| beside v^3 in 10 of 40, by 1-9 in the score, its coefficient 0.26-1.34 and
+#: the viscous one pulled to -1.12 on average, the viscous term's mean -0.30 +- 0.07 for the truth's 0; re-tested,
+#: v^3 alone in 40 of 40, -0.018 +- 0.045, as the corrected normal equations of that law solved directly)
 ROBUST_VELOCITY_SET = True
 #: ... in the damping-only regression (the restoring force fixed by the paper route), at each speed of the check
 #: grid against the largest |D v| at that speed, the speeds geometric from `DISSIPATION_SLOWEST` x the bound up to
