@@ -131,18 +131,25 @@ def measure(model, system, i, n=401):
             out["width"] = float(np.median(up - low)) / scale
             out["max_err_span"] = float(np.max(np.abs(np.asarray(band.mean)[:, i] - truth))) / scale
     out["restoring_error"] = g.metrics.restoring_error(model, system.truth, i, system.x_range[i])
-    # damping band over the span x v_range
+    out["cover_damping"], out["width_damping"] = damping_band(model, system, i)
+    return out
+
+
+def damping_band(model, system, i: int, level: float = LEVEL) -> tuple[float, float]:
+    """The damping band of DOF `i` over the wells' span x v_range (41 x 40 points, v != 0, the other DOFs at 0):
+    the share of the points where it holds the truth's damping force, and its median full width relative to the
+    largest |truth| there."""
+    d = model.n_dof
+    eq = system.equilibria[:, i]
     xs = np.linspace(eq.min(), eq.max(), 41)
     vs = np.linspace(*system.v_range[i], 41)
     vs = vs[vs != 0]
     xx, vv = (a.ravel() for a in np.meshgrid(xs, vs, indexing="ij"))
     x, v = _on_axis(xx, d, i), _on_axis(vv, d, i)
-    band = jax.vmap(lambda p, q: g.force_band(model, p, q, part="damping", level=LEVEL))(x, v)
+    band = jax.vmap(lambda p, q: g.force_band(model, p, q, part="damping", level=level))(x, v)
     truth = np.asarray(jax.vmap(system.truth.damping)(x, v))[:, i]
     low, up = np.asarray(band.lower)[:, i], np.asarray(band.upper)[:, i]
-    out["cover_damping"] = float(np.mean((truth >= low) & (truth <= up)))
-    out["width_damping"] = float(np.median(up - low)) / float(np.max(np.abs(truth)))
-    return out
+    return float(np.mean((truth >= low) & (truth <= up))), float(np.median(up - low)) / float(np.max(np.abs(truth)))
 
 
 #: extra `reconstruct` keywords (`--no-velocity-eiv`)

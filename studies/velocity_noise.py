@@ -18,26 +18,23 @@ Case: the bistable joint (position-independent damping, truth 10 v^3), 5 degrees
 """
 
 import argparse
+import sys
 import time
 import warnings
+from pathlib import Path
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 import gmr_jax as g
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from coverage import damping_band
 
-def damping_coverage(model, system, level=0.95):
-    """Share of the wells' span x v_range (41 x 40 points, v != 0) where the model's 95 % damping band holds the
-    truth's damping force (as `studies/coverage.py` measures it)."""
-    eq = system.equilibria[:, 0]
-    vs = np.linspace(*system.v_range[0], 41)
-    xx, vv = (a.ravel() for a in np.meshgrid(np.linspace(eq.min(), eq.max(), 41), vs[vs != 0], indexing="ij"))
-    x, v = jnp.asarray(xx)[:, None], jnp.asarray(vv)[:, None]
-    band = jax.vmap(lambda p, q: g.force_band(model, p, q, part="damping", level=level))(x, v)
-    truth = np.asarray(jax.vmap(system.truth.damping)(x, v))[:, 0]
-    return float(np.mean((truth >= np.asarray(band.lower)[:, 0]) & (truth <= np.asarray(band.upper)[:, 0])))
+
+def damping_coverage(model, system) -> float:
+    """Share of the wells' span x v_range where the model's 95 % damping band holds the truth's damping force
+    (`studies/coverage.damping_band`)."""
+    return damping_band(model, system, 0)[0]
 
 
 def fit(recs, clean, system, v_clean: bool, velocity_eiv: bool = False, coordination: str = "joint"):
