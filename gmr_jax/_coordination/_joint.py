@@ -521,7 +521,10 @@ def joint_coordinate(
     and its damping coefficients less the chosen ones, None / inf / zeros when there is none: rule 14 of
     `reconstruct`'s checks; `joint_truncation_ratio`, `_tail`: where the chosen degree is the cap, the series'
     convergence ratio and the RMS of its estimated tail on the span, whose covariance the returned one holds
-    (`_truncation`), 0 elsewhere; `joint_velocity_noise`: whether the columns were corrected for `v_noise`). `refine`: on a conflict, search once more on the penalty grid
+    (`_truncation`), 0 elsewhere; `joint_velocity_noise`: whether the columns were corrected for `v_noise`;
+    `joint_velocity_orders_dropped`: the velocity terms the score chose and their robust covariance did not keep
+    (`_robust_velocity_set`); `joint_velocity_noise_shift`: what the noise of v moves the chosen law by where it
+    is not corrected for, in the flat layout, zeros without the correction). `refine`: on a conflict, search once more on the penalty grid
     refined to half decades (module docstring). `x_noise`: per well, the variance of white noise
     on the measured x; the normal equations are then corrected for it (errors in variables, the
     corrected score of `_fit/_errors_in_variables.py`, each power of u replaced by its Hermite
@@ -571,9 +574,11 @@ def joint_coordinate(
     recorded = (gram, rhs)  # the recorded samples' normal equations (their residual gives sigma^2)
     if x_noise is not None and not settings.damping_only:
         gram, rhs = _corrected(gram, rhs, u, vs, ys, w, np.asarray(x_noise, float) / (2.0 * h) ** 2, layout, scale)
-    v_rows = None
+    v_rows, v_gram = None, None
     if vd is not None:
+        before = gram
         gram, v_rows = _velocity_gram(gram, vd, v_noise, w, rows, scale)
+        v_gram = before - gram if v_rows is not None else None  # the noise of v the normal matrix held
     sr, sd = scale[layout.restoring], scale[layout.damping]
     omega_r = _penalty(layout.k, settings.penalty_order) / np.outer(sr, sr)
     omega_d = _penalty(layout.j, min(2, layout.j)) / np.outer(sd, sd) if layout.j >= 2 else np.zeros((layout.j + 1,) * 2)
@@ -645,6 +650,14 @@ def joint_coordinate(
     for i, order in enumerate(layout.vel):
         lin[off_v + order, layout.k + layout.j + 2 + i] = 1.0 / scale[layout.k + layout.j + 2 + i]
     flat = lin @ theta[best]
+    # what the noise of v would have moved the chosen law by, uncorrected: the same candidate solved on the normal
+    # matrix that holds it (a measured v^3 column differs from the corrected one by 3 s^2 v, in the span of the C(0) v
+    # column every candidate has, so the law on the uncorrected columns is this one)
+    shift = np.zeros(g_size)
+    if v_gram is not None:
+        mk = masks[best].astype(float)
+        plain = np.linalg.solve(np.linalg.inv(ainv[best]) + v_gram * np.outer(mk, mk), rhs * mk)
+        shift = lin @ (plain - theta[best])
     cov = lin @ cov_theta @ lin.T
     # the degree choice's discrepancy (issue 15): the best admissible candidate of another degree K
     # (the runner-up law), as a difference to the chosen one, weighted as in Bayesian model averaging
@@ -685,7 +698,8 @@ def joint_coordinate(
              "joint_damping_alternative_velocity": damping_alt[off_v:off_p].tolist(),
              "joint_damping_alternative_position": damping_alt[off_p:].tolist(),
              "joint_truncation_ratio": ratio, "joint_truncation_tail": tail,
-             "joint_velocity_noise": v_rows is not None, "joint_velocity_orders_dropped": dropped_terms}
+             "joint_velocity_noise": v_rows is not None, "joint_velocity_orders_dropped": dropped_terms,
+             "joint_velocity_noise_shift": shift.tolist()}
     return (flat[: layout.k + 1], flat[off_v:off_p], flat[off_p:], cov, stats)
 
 

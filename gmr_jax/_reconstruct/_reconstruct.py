@@ -388,19 +388,44 @@ def _damping_force_rows(g: GlobalCoefficients, x, v) -> np.ndarray:
     return rows
 
 
-def _damping_moved(corrected: Solution, plain: Solution, fits: LocalFit, vs, w) -> float:
-    """RMS over the wells' span x the recorded speeds (21 x 20 points) of the damping forces' difference between
-    the joint regression corrected for the noise of v and the same regression without, in the corrected one's
-    standard errors (`V_NOISE_DAMPING`)."""
+def _v_noise_negligible(fits: LocalFit, v_noise, vs, w, library: Library) -> bool:
+    """Whether the noise of v cannot move the damping by a tenth of `V_NOISE_DAMPING` standard errors, without the
+    regression that measures it (`_damping_moved`): where every damping term the local fits kept is linear in v
+    (c v, c x^j v), that noise only attenuates them, by s^2 / <v^2> of themselves, so their largest |t| times the
+    largest such ratio over the wells bounds the move (taken twice); a term nonlinear in v (Coulomb, v|v|, v^3)
+    also leaks into the others, by up to 50 x that product (bistable joint, 10 v^3, 30 dB, seed 1: 0.091, moved by
+    4.6 standard errors), and is always measured. 5-cell Kresling, viscous, 60 dB: products 0.005-0.007 (measured
+    moves 0.002-0.003), skipped."""
+    terms = library.terms()
+    damping = np.array([phys in (VELOCITY_DAMPING, POSITION_DAMPING) for phys, _ in terms])
+    nonlinear = np.array([phys == VELOCITY_DAMPING and k != 1 for phys, k in terms])
+    coef, cov = np.asarray(fits.coef), np.asarray(fits.covariance)
+    if np.any(coef[:, nonlinear] != 0):
+        return False
+    var = np.diagonal(cov, axis1=1, axis2=2)
+    t = np.where(damping[None, :] & (var > 0), np.abs(coef) / np.sqrt(np.where(var > 0, var, 1.0)), 0.0)
+    vs, w = np.asarray(vs), np.asarray(w)
+    power = np.array([np.sum(w[k] * vs[k] ** 2) / max(np.sum(w[k]), 1e-300) for k in range(vs.shape[0])])
+    ratio = np.max(np.asarray(v_noise, float) / np.where(power > 0, power, np.inf))
+    return bool(2.0 * ratio * float(t.max(initial=0.0)) < 0.1 * V_NOISE_DAMPING)
+
+
+def _damping_moved(corrected: Solution, fits: LocalFit, vs, w) -> float:
+    """RMS over the wells' span x the recorded speeds (21 x 20 points) of what the noise of v moves the joint
+    regression's damping force by, uncorrected (`_joint`'s `joint_velocity_noise_shift`), in its standard errors
+    (`V_NOISE_DAMPING`); 0 where the correction did not apply."""
+    g = corrected.value
+    n_damp = np.asarray(g.velocity_damping).shape[0] + np.asarray(g.position_damping).shape[0]
+    shift = np.asarray(corrected.stats.get("joint_velocity_noise_shift", []), float)[-n_damp:]
     eq = np.asarray(fits.equilibrium)
     top = _recorded_speed(vs, w)
+    if not corrected.stats.get("joint_velocity_noise", False) or shift.size != n_damp or top <= 0:
+        return 0.0
     xx, vv = (a.ravel() for a in np.meshgrid(np.linspace(eq.min(), eq.max(), 21),
                                              np.linspace(-top, top, 20), indexing="ij"))
-    a, b = corrected.value, plain.value
-    if np.asarray(a.flat()).shape != np.asarray(b.flat()).shape or top <= 0:
-        return 0.0
-    rows = _damping_force_rows(a, xx, vv)
-    diff = rows @ (np.asarray(a.flat()) - np.asarray(b.flat()))
+    rows = _damping_force_rows(g, xx, vv)
+    ns = rows.shape[1] - n_damp
+    diff = rows[:, ns:] @ shift
     se = np.sqrt(np.maximum(np.einsum("ip,pq,iq->i", rows, np.asarray(corrected.aux), rows), 0.0))
     ok = se > 0
     return float(np.sqrt(np.mean((diff[ok] / se[ok]) ** 2))) if ok.any() else 0.0
@@ -681,18 +706,17 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                         why = why + [f"kept: {reason}"]
                 if route == "gls" and faults["damping"]:
                     coord, route = _joint(fits, xs, vs, ys, w, speed, restoring=paper, rows=rows, segs=segs, gain=gain, v_noise=v_noise), "gls + joint damping"
-                elif route == "gls" and V_NOISE_DAMPING and v_noise is not None and all(v is not None for v in v_noise):
+                elif (route == "gls" and V_NOISE_DAMPING and v_noise is not None
+                      and all(v is not None for v in v_noise) and not _v_noise_negligible(fits, v_noise, vs, w, library)):
                     # ... and where the noise of a measured v, which the local fits take as exact, moves the damping
                     corrected = _joint(fits, xs, vs, ys, w, speed, restoring=paper, rows=rows, segs=segs, gain=gain,
                                        v_noise=v_noise)
-                    if corrected.stats.get("joint_velocity_noise", False):
-                        plain = _joint(fits, xs, vs, ys, w, speed, restoring=paper, rows=rows, segs=segs, gain=gain)
-                        moved = _damping_moved(corrected, plain, fits, vs, w)
-                        if moved > V_NOISE_DAMPING:
-                            coord, route = corrected, "gls + joint damping"
-                            why = why + [f"damping: the noise of the measured v moves it by {moved:.3g} standard "
-                                         "errors (RMS over the wells' span and the recorded speeds); the joint "
-                                         "regression's, corrected for it, replaces the local fits'"]
+                    moved = _damping_moved(corrected, fits, vs, w)
+                    if moved > V_NOISE_DAMPING:
+                        coord, route = corrected, "gls + joint damping"
+                        why = why + [f"damping: the noise of the measured v moves it by {moved:.3g} standard errors "
+                                     "(RMS over the wells' span and the recorded speeds); the joint regression's, "
+                                     "corrected for it, replaces the local fits'"]
                 if route != "joint" and unconfirmed:
                     warnings += _sanity.check_escape_reach(i, np.asarray(paper.value.stiffness),
                                                            np.asarray(fits.equilibrium), energy)
