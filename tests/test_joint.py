@@ -499,7 +499,8 @@ def test_a_velocity_term_is_kept_on_its_robust_covariance(monkeypatch):
     term on sigma^2 A^-1, several times too narrow where the residual grows with |v|, and keeps a v|v| beside the
     truth's v^3 in a quarter of the draws (10 of 40 on the full candidate set), pulling the viscous term negative; re-tested on the sandwich it is
     dropped, and the viscous term is unbiased (bistable joint, 10 v^3, 5 degrees, 30 dB on v, seed 4's sweeps with
-    fresh draws of v's noise)."""
+    fresh draws of v's noise); the laws that hold it are no longer alternatives (rule 14 read them as better by 1-40
+    in the score)."""
     import gmr_jax._reconstruct._reconstruct as recon
     from gmr_jax._coordination import _joint
 
@@ -534,6 +535,9 @@ def test_a_velocity_term_is_kept_on_its_robust_covariance(monkeypatch):
                                                             v_noise=kwargs["v_noise"])
             assert stats["joint_velocity_noise"]
             kept[on] += 2 in stats["joint_velocity_orders"]
+            if stats["joint_velocity_orders_dropped"]:  # the rejected term is out of the alternatives too (rule 14)
+                assert 2 not in (stats["joint_damping_alternative_orders"] or []), stats
+                assert stats["joint_damping_alternative_delta"] > 0, stats
             linear[on].append(float(vdamp[1]))
     mean, se = np.mean(linear[True]), np.std(linear[True], ddof=1) / np.sqrt(40)
     assert kept[True] <= 1 and abs(mean) < 3 * se, (kept, mean, se)

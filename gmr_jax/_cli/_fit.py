@@ -28,7 +28,8 @@ def register(sub):
     f.add_argument("--method", choices=["gmr", "gmc-sindy"], default="gmr")
     f.add_argument("--coordination", choices=["auto", "gls", "hermite", "joint"], default="auto",
                    help="GMR's global step: auto (default: the paper's covariance-weighted route unless it fails "
-                   "its own data or its damping feeds energy in, then the joint regression), gls, hermite (the "
+                   "its own data or its damping feeds energy in, then the joint regression; its damping also where the "
+                   "noise of a measured v moves it), gls, hermite (the "
                    "paper's exact interpolant), joint (one penalised regression on all wells' data, admissible "
                    "models only)")
     f.add_argument("--no-shared-design", action="store_true",

@@ -390,7 +390,8 @@ def _damping_force_rows(g: GlobalCoefficients, x, v) -> np.ndarray:
 
 def _v_noise_negligible(fits: LocalFit, v_noise, vs, w, library: Library) -> bool:
     """Whether the noise of v cannot move the damping by a tenth of `V_NOISE_DAMPING` standard errors, without the
-    regression that measures it (`_damping_moved`): where every damping term the local fits kept is linear in v
+    regression that measures it (`_damping_moved`), on a heuristic bound: where every damping term the local fits kept
+    is linear in v
     (c v, c x^j v), that noise only attenuates them, by s^2 / <v^2> of themselves, so their largest |t| times the
     largest such ratio over the wells bounds the move (taken twice); a term nonlinear in v (Coulomb, v|v|, v^3)
     also leaks into the others, by up to 50 x that product (bistable joint, 10 v^3, 30 dB, seed 1: 0.091, moved by
@@ -706,13 +707,16 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                         why = why + [f"kept: {reason}"]
                 if route == "gls" and faults["damping"]:
                     coord, route = _joint(fits, xs, vs, ys, w, speed, restoring=paper, rows=rows, segs=segs, gain=gain, v_noise=v_noise), "gls + joint damping"
-                elif (route == "gls" and V_NOISE_DAMPING and v_noise is not None
+                elif (route == "gls" and V_NOISE_DAMPING and v_noise is not None and gain is None and segs is None
                       and all(v is not None for v in v_noise) and not _v_noise_negligible(fits, v_noise, vs, w, library)):
                     # ... and where the noise of a measured v, which the local fits take as exact, moves the damping
+                    # (not where the columns pass a filter gain or a slow band: the joint regression does not correct
+                    # for it there)
                     corrected = _joint(fits, xs, vs, ys, w, speed, restoring=paper, rows=rows, segs=segs, gain=gain,
                                        v_noise=v_noise)
                     moved = _damping_moved(corrected, fits, vs, w)
-                    if moved > V_NOISE_DAMPING:
+                    if (moved > V_NOISE_DAMPING and corrected.result == RESULTS.successful
+                            and corrected.stats.get("joint_admissible", False)):
                         coord, route = corrected, "gls + joint damping"
                         why = why + [f"damping: the noise of the measured v moves it by {moved:.3g} standard errors "
                                      "(RMS over the wells' span and the recorded speeds); the joint regression's, "
@@ -945,6 +949,9 @@ def reconstruct(
       sigma^2 A^-1). Bistable joint (10 v^3), 5 degrees, 30 dB, 4 seeds: v^3 9.28-9.49 (7-10
       standard errors low) -> 9.90-10.04 (within 1.7); the magnet's damping band at 40 dB holds the
       truth on 100 % of its span instead of 60 % (`studies/velocity_noise.py`, `studies/coverage.py`).
+      A velocity term the score keeps is tested again on that covariance (`_joint._robust_velocity_set`).
+      On route "auto", the paper route's damping (local fits that take v as exact) gives way to the
+      corrected joint damping where the noise moves it by more than a standard error (`V_NOISE_DAMPING`).
       Reported per well in `dofs[i].stats["velocity_noise"]`; False: the velocity columns taken
       as measured.
     - `throw`: raise `GMRComputationError` on a numerical failure (a local fit or the
