@@ -97,6 +97,11 @@ def dissipation_speeds(speed: float, geometric: bool = False) -> np.ndarray:
     if geometric:
         return np.geomspace(DISSIPATION_SLOWEST * speed, speed, DISSIPATION_SPEEDS)
     return np.linspace(0.0, speed, DISSIPATION_SPEEDS + 1)[1:]
+#: In the damping-only regression, candidates without the C(x) v block (J = -1): the boundary of the admissible
+#: laws where the data put the viscous term below zero, which the per-speed check rejects beside a higher power of
+#: v (bistable joint, 10 v^3, 5 degrees, 30 dB, seed 4: a Coulomb term 0.44 +- 0.82 was admitted to keep
+#: -1.12 v + 10.04 v^3 dissipative at rest, the damping band on 70 % of the span x v_range)
+DAMPING_WITHOUT_VISCOUS = True
 #: Half-width, in u, of the grid on which F's sign changes are counted (5 half-spans past the
 #: outer equilibria).
 SIGN_GRID_HALF_WIDTH = 3.0
@@ -338,7 +343,8 @@ def _candidates(n_wells: int, layout: _Layout, settings: JointSettings):
     degrees = [k for k in range(k_min, layout.k + 1) if k % 2 == 1] if not settings.damping_only else [-1]
     subsets = [s for r in range(len(layout.vel) + 1) for s in itertools.combinations(range(len(layout.vel)), r)]
     masks, lam_r, lam_d, meta = [], [], [], []
-    for k, j, s, a, b in itertools.product(degrees, range(layout.j + 1), subsets,
+    lowest = -1 if settings.damping_only and DAMPING_WITHOUT_VISCOUS else 0  # -1: no C(x) v block at all
+    for k, j, s, a, b in itertools.product(degrees, range(lowest, layout.j + 1), subsets,
                                            range(len(settings.log_lambdas)), range(len(settings.log_lambdas_damping))):
         m = np.zeros(layout.p, bool)
         m[: k + 1] = True
