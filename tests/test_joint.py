@@ -327,7 +327,8 @@ def test_joint_damping_dissipates_below_the_recorded_speeds(monkeypatch):
     band holding the truth on 80 % of the span (25 % before). Corrected for the noise on v (the default), the data
     put the viscous term below zero on this draw (2.1 standard errors), which the check rejects beside v^3: a
     Coulomb term was admitted to keep it dissipative at rest, 0.435 sgn(v) - 1.12 v + 10.04 v^3, 70 %; with the
-    candidates that leave the viscous term out (`_joint.DAMPING_WITHOUT_VISCOUS`, its boundary), 9.998 v^3, 100 %."""
+    candidates that leave the viscous term out (`_joint.DAMPING_WITHOUT_VISCOUS`, where v was corrected),
+    9.998 v^3, 100 %."""
     from _truth import damping_coverage  # tests/_truth.py
 
     from gmr_jax._coordination import _joint
@@ -576,3 +577,23 @@ def test_the_noise_of_a_measured_v_hands_the_damping_to_the_joint_regression(mon
         out[gate] = (st["coordination"], len(note), damping_coverage(sol.value, system))
     assert out[default][:2] == ("gls + joint damping", 1) and out[default][2] >= 0.9, out
     assert out[0.0][:2] == ("gls", 0) and out[0.0][2] < 0.9, out  # measured 64 %
+
+
+def test_damping_only_candidates_without_the_viscous_term():
+    """`_joint._candidates` / `_boundary_allowed` (`DAMPING_WITHOUT_VISCOUS`): a damping-only candidate without the
+    C(x) v block is built only with some velocity term (never the law with no damping, which `damping_faults`
+    rejects) and once (no block, no penalty to vary), and may be chosen only where the velocity columns were
+    corrected for the noise of v."""
+    from gmr_jax._coordination._joint import JointSettings, _boundary_allowed, _candidates, _Layout
+
+    layout = _Layout(13, 1, (0, 3))
+    settings = JointSettings(log_lambdas=(0.0,), damping_only=True, velocity_orders=(0, 3))
+    masks, lam_r, lam_d, meta = _candidates(2, layout, settings)
+    boundary = [i for i, (_, j, _) in enumerate(meta) if j == -1]
+    assert sorted(meta[i][2] for i in boundary) == [(0,), (0, 3), (3,)] and all(lam_d[i] == 0 for i in boundary)
+    assert all(not masks[i][layout.k + 1 : layout.k + 3].any() and masks[i].any() for i in boundary)
+    assert _boundary_allowed(meta, corrected=True).all()
+    ok = _boundary_allowed(meta, corrected=False)
+    assert not ok[boundary].any() and ok.sum() == len(meta) - len(boundary)
+    full = _candidates(2, layout, JointSettings(log_lambdas=(0.0,), velocity_orders=(0, 3)))[3]
+    assert all(j >= 0 for _, j, _ in full)  # not in the full joint regression
