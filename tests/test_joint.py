@@ -318,28 +318,22 @@ def test_damping_only_regression_dissipates_at_every_speed():
     assert np.all(power >= -1e-3 * np.max(np.abs(power), axis=0)), vdamp
 
 
-@pytest.mark.slow  # three reconstructions of a coverage-study case (~30 s)
-def test_joint_damping_dissipates_below_the_recorded_speeds(monkeypatch):
+@pytest.mark.slow  # two reconstructions of a coverage-study case (~20 s)
+def test_joint_damping_dissipates_below_the_recorded_speeds():
     """Bistable joint with damping 10 v^3, 5 degree sweeps, 30 dB, seed 4 (`studies/coverage.py`): the joint
     damping was -3.76 v + 2.72 v|v| + 9.56 v^3, which feeds energy in below |v| = 0.5; the dissipation check
     compared it with the largest |D v| of its grid, at the speed bound, where v^3 dominates. Checked at each
     speed (geometric down to 1e-4 of the bound): 1.25 v + 9.90 v^3 with the velocity columns as measured, the
-    band holding the truth on 80 % of the span (25 % before). Corrected for the noise on v (the default), the data
-    put the viscous term below zero on this draw (2.1 standard errors), which the check rejects beside v^3: a
-    Coulomb term was admitted to keep it dissipative at rest, 0.435 sgn(v) - 1.12 v + 10.04 v^3, 70 %; with the
-    candidates that leave the viscous term out (`_joint.DAMPING_WITHOUT_VISCOUS`, where v was corrected),
-    9.998 v^3, 100 %."""
+    band holding the truth on 80 % of the span (25 % before); corrected for the noise on v (the default),
+    0.435 sgn(v) - 1.12 v + 10.04 v^3, 70 % (its linear term 2.4 standard deviations of the estimator's scatter
+    low on this draw of the noise: over 20 redraws about the same clean v, 0.08 +- 0.38)."""
     from _truth import damping_coverage  # tests/_truth.py
-
-    from gmr_jax._coordination import _joint
 
     system = g.systems.bistable_joint("position_independent")
     recs = g.systems.make_recordings(system, np.deg2rad(5.0), snr_db=30.0, seed=4)
     x = np.linspace(*system.x_range[0], 41)[:, None]
     v = np.geomspace(1e-4, 10.0, 60)[None, :]
-    # (velocity_eiv, without viscous, v^3 tolerance, coverage): measured 9.90 / 80 %, 9.998 / 100 %, 10.04 / 70 %
-    for eiv, boundary, b3_tol, cover in ((False, True, 0.05, 0.7), (True, True, 0.005, 0.9), (True, False, 0.01, 0.65)):
-        monkeypatch.setattr(_joint, "DAMPING_WITHOUT_VISCOUS", boundary)
+    for eiv, b3_tol, cover in ((False, 0.05, 0.7), (True, 0.01, 0.65)):  # measured 9.90 / 80 %, 10.04 / 70 %
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             sol = g.reconstruct(recs, g.Library(*system.orders["gmr"]), throw=False, velocity_eiv=eiv)
@@ -350,10 +344,7 @@ def test_joint_damping_dissipates_below_the_recorded_speeds(monkeypatch):
         power = np.polynomial.polynomial.polyval(x, c) * v**2 + sum(b[j] * v ** (j + 1) for j in range(b.size))
         assert np.all(power >= 0.0), b  # D v >= 0 at every speed
         assert abs(b[3] / 10.0 - 1.0) < b3_tol, b
-        covered = damping_coverage(sol.value, system)
-        assert covered >= cover, (eiv, boundary, b, covered)
-        if eiv:  # the Coulomb term comes and goes with the boundary candidates (the test's teeth)
-            assert (b[0] == 0.0) == boundary and (covered < 0.9) != boundary, (boundary, b, covered)
+        assert damping_coverage(sol.value, system) >= cover
 
 
 def test_truncation_at_the_cap_estimates_the_series_tail(monkeypatch):
@@ -577,23 +568,3 @@ def test_the_noise_of_a_measured_v_hands_the_damping_to_the_joint_regression(mon
         out[gate] = (st["coordination"], len(note), damping_coverage(sol.value, system))
     assert out[default][:2] == ("gls + joint damping", 1) and out[default][2] >= 0.9, out
     assert out[0.0][:2] == ("gls", 0) and out[0.0][2] < 0.9, out  # measured 64 %
-
-
-def test_damping_only_candidates_without_the_viscous_term():
-    """`_joint._candidates` / `_boundary_allowed` (`DAMPING_WITHOUT_VISCOUS`): a damping-only candidate without the
-    C(x) v block is built only with some velocity term (never the law with no damping, which `damping_faults`
-    rejects) and once (no block, no penalty to vary), and may be chosen only where the velocity columns were
-    corrected for the noise of v."""
-    from gmr_jax._coordination._joint import JointSettings, _boundary_allowed, _candidates, _Layout
-
-    layout = _Layout(13, 1, (0, 3))
-    settings = JointSettings(log_lambdas=(0.0,), damping_only=True, velocity_orders=(0, 3))
-    masks, lam_r, lam_d, meta = _candidates(2, layout, settings)
-    boundary = [i for i, (_, j, _) in enumerate(meta) if j == -1]
-    assert sorted(meta[i][2] for i in boundary) == [(0,), (0, 3), (3,)] and all(lam_d[i] == 0 for i in boundary)
-    assert all(not masks[i][layout.k + 1 : layout.k + 3].any() and masks[i].any() for i in boundary)
-    assert _boundary_allowed(meta, corrected=True).all()
-    ok = _boundary_allowed(meta, corrected=False)
-    assert not ok[boundary].any() and ok.sum() == len(meta) - len(boundary)
-    full = _candidates(2, layout, JointSettings(log_lambdas=(0.0,), velocity_orders=(0, 3)))[3]
-    assert all(j >= 0 for _, j, _ in full)  # not in the full joint regression

@@ -97,11 +97,6 @@ def dissipation_speeds(speed: float, geometric: bool = False) -> np.ndarray:
     if geometric:
         return np.geomspace(DISSIPATION_SLOWEST * speed, speed, DISSIPATION_SPEEDS)
     return np.linspace(0.0, speed, DISSIPATION_SPEEDS + 1)[1:]
-#: In the damping-only regression, candidates without the C(x) v block (J = -1), where the velocity columns were
-#: corrected (`_boundary_allowed`): a law without a viscous term, also the boundary of the admissible laws where the
-#: data put the viscous term below zero, which the per-speed check rejects beside a higher power of v (bistable joint, 10 v^3, 5 degrees, 30 dB, seed 4: a Coulomb term 0.44 +- 0.82 was admitted to keep
-#: -1.12 v + 10.04 v^3 dissipative at rest, the damping band on 70 % of the span x v_range)
-DAMPING_WITHOUT_VISCOUS = True
 #: Half-width, in u, of the grid on which F's sign changes are counted (5 half-spans past the
 #: outer equilibria).
 SIGN_GRID_HALF_WIDTH = 3.0
@@ -343,11 +338,8 @@ def _candidates(n_wells: int, layout: _Layout, settings: JointSettings):
     degrees = [k for k in range(k_min, layout.k + 1) if k % 2 == 1] if not settings.damping_only else [-1]
     subsets = [s for r in range(len(layout.vel) + 1) for s in itertools.combinations(range(len(layout.vel)), r)]
     masks, lam_r, lam_d, meta = [], [], [], []
-    lowest = -1 if settings.damping_only and DAMPING_WITHOUT_VISCOUS else 0  # -1: no C(x) v block at all
-    for k, j, s, a, b in itertools.product(degrees, range(lowest, layout.j + 1), subsets,
+    for k, j, s, a, b in itertools.product(degrees, range(layout.j + 1), subsets,
                                            range(len(settings.log_lambdas)), range(len(settings.log_lambdas_damping))):
-        if j == -1 and (not s or b > 0):  # some damping is kept (no damping is a fault); no block, no penalty to vary
-            continue
         m = np.zeros(layout.p, bool)
         m[: k + 1] = True
         m[layout.k + 1 : layout.k + 2 + j] = True
@@ -356,18 +348,6 @@ def _candidates(n_wells: int, layout: _Layout, settings: JointSettings):
         masks.append(m), lam_r.append(a), lam_d.append(b)
         meta.append((k, j, tuple(layout.vel[i] for i in s)))
     return np.array(masks), np.array(lam_r), np.array(lam_d), meta
-
-
-def _boundary_allowed(meta, corrected: bool) -> np.ndarray:
-    """Per candidate, whether it may be chosen: a damping-only candidate without the C(x) v block (J = -1,
-    `DAMPING_WITHOUT_VISCOUS`) only where the velocity columns were corrected for the noise of v (`corrected`).
-    Uncorrected, the viscous term holds that noise's leak from v^3 (+3 s^2 c_3), and a law without it keeps a
-    v|v| the leak put there (bistable joint, 10 v^3, 5 degrees, 30 dB, seed 4, v as measured: 0.80 v|v| + 9.79 v^3
-    for 1.25 v + 9.90 v^3, its band on 10 % of the span x v_range instead of 80 %). Admitting it only as the
-    boundary of a law whose viscous term the data put below zero was tried and dropped: seed 0 (corrected) then
-    took 0.03 v|v| + 9.99 v^3, the boundary of v|v| + v^3, because v^3 alone, the best score of all, has a viscous
-    counterpart at +0.10 (0.3 standard errors)."""
-    return np.array([j != -1 or corrected for _, j, _ in meta])
 
 
 def _pseudo_logdet(omega: np.ndarray, size: int) -> tuple[int, float]:
@@ -616,14 +596,11 @@ def joint_coordinate(
                   tuple(jnp.asarray(a) for a in recorded))
     theta, ainv, rss, edf, bic, changes, confines, dissipative = (np.asarray(a) for a in out)
     shape_ok = (changes == 2 * n_wells - 1) & confines if not settings.damping_only else True
-    allowed = _boundary_allowed(meta, v_rows is not None)
-    admissible = shape_ok & dissipative & np.isfinite(bic) & allowed
+    admissible = shape_ok & dissipative & np.isfinite(bic)
     score = np.where(admissible, bic, np.inf)
     best = int(np.argmin(score)) if admissible.any() else int(np.nanargmin(np.where(np.isfinite(bic), bic, np.inf)))
     # prior-data conflict: the best admissible score against the best of all candidates (-2 log evidence)
-    # (a boundary candidate stands for its counterpart's boundary only: never the best of all in its own right)
-    ranked_all = np.isfinite(bic) & allowed
-    free = int(np.argmin(np.where(ranked_all, bic, np.inf))) if ranked_all.any() else best
+    free = int(np.argmin(np.where(np.isfinite(bic), bic, np.inf))) if np.isfinite(bic).any() else best
     conflict = float(score[best] - bic[free]) if admissible.any() else 0.0
     if conflict > CONFLICT and refine and (len(settings.log_lambdas) > 1 or settings.damping_only):
         # the data reject every admissible law: the best admissible one sits at the edge of admissibility

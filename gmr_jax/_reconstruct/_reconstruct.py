@@ -534,7 +534,7 @@ def _joint(fits: LocalFit, xs, vs, ys, w, speed: float, restoring: Solution | No
     g = GlobalCoefficients(jnp.asarray(stiff), jnp.asarray(vdamp), jnp.asarray(pdamp))
     if restoring is None:
         stats |= {"K_r": stats["joint_degree"], "cond_r": 0.0}
-    stats |= {"K_d": max(int(stats["joint_damping_degree"]), 0), "cond_d": 0.0}  # -1: no C(x) v block
+    stats |= {"K_d": stats["joint_damping_degree"], "cond_d": 0.0}
     finite = bool(np.all(np.isfinite(np.asarray(g.flat()))))
     return Solution(value=g, result=RESULTS.successful if finite else RESULTS.nonfinite, stats=stats,
                     aux=jnp.asarray(cov))
