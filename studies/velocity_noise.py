@@ -55,6 +55,16 @@ def fit(recs, clean, system, v_clean: bool, velocity_eiv: bool = False, coordina
             sol.stats["dofs"][0].stats["coordination"])
 
 
+def redraws(recs, clean, n: int, rng, as_recorded: bool):
+    """`n` copies of the recordings whose v is the clean v plus fresh white noise of the recorded level (per
+    channel); x, a and the base as recorded (`as_recorded`) or noise-free."""
+    for _ in range(n):
+        yield [g.Recording(t=c.t, x=(r if as_recorded else c).x,
+                           v=c.v + np.std(r.v - c.v, axis=0) * rng.standard_normal(c.v.shape),
+                           a=(r if as_recorded else c).a, base_acc=(r if as_recorded else c).base_acc,
+                           masses=c.masses, name=c.name) for r, c in zip(recs, clean)]
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=8)
@@ -84,28 +94,18 @@ def main():
             *_, cover, route = fit(recs, clean, s, False, eiv, coordination="auto")
             auto.append((seed, eiv, cover, route))
             print(auto[-1], flush=True)
-    redraw = []
-    if args.redraws > 0:  # x, a and the base as recorded at one seed; v = its clean v + fresh noise of the recorded level
-        recs = g.systems.make_recordings(s, amp, snr_db=args.snr, seed=args.redraw_seed)
-        clean = g.systems.make_recordings(s, amp, snr_db=None, seed=args.redraw_seed)
-        rng = np.random.default_rng(12345)
-        for _ in range(args.redraws):
-            noisy = [g.Recording(t=c.t, x=c.x, v=c.v + np.std(r.v - c.v, axis=0) * rng.standard_normal(c.v.shape),
-                                 a=c.a, base_acc=c.base_acc, masses=c.masses, name=c.name) for r, c in zip(recs, clean)]
-            b, se, orders, _, _ = fit(noisy, clean, s, False, True)
-            redraw.append((b, se, orders))
-            print("redraw", b[:4], se[:4], orders, flush=True)
-    auto_redraw = []
-    if args.auto_redraws > 0:  # as above, but x, a and the base as recorded, and reconstruct's defaults
-        recs = g.systems.make_recordings(s, amp, snr_db=args.snr, seed=args.redraw_seed)
-        clean = g.systems.make_recordings(s, amp, snr_db=None, seed=args.redraw_seed)
-        rng = np.random.default_rng(5)
-        for _ in range(args.auto_redraws):
-            noisy = [g.Recording(t=r.t, x=r.x, v=c.v + np.std(r.v - c.v, axis=0) * rng.standard_normal(c.v.shape),
-                                 a=r.a, base_acc=r.base_acc, masses=c.masses, name=c.name) for r, c in zip(recs, clean)]
-            b, se, orders, cover, route = fit(noisy, clean, s, False, True, coordination="auto")
-            auto_redraw.append((b, se, orders, cover, route))
-            print("auto redraw", b[:4], se[:4], orders, cover, route, flush=True)
+    recs = g.systems.make_recordings(s, amp, snr_db=args.snr, seed=args.redraw_seed)
+    clean = g.systems.make_recordings(s, amp, snr_db=None, seed=args.redraw_seed)
+    redraw = []  # x, a and the base noise-free at one seed; v = its clean v + fresh noise of the recorded level
+    for noisy in redraws(recs, clean, args.redraws, np.random.default_rng(12345), as_recorded=False):
+        b, se, orders, _, _ = fit(noisy, clean, s, False, True)
+        redraw.append((b, se, orders))
+        print("redraw", b[:4], se[:4], orders, flush=True)
+    auto_redraw = []  # as above, but x, a and the base as recorded, and reconstruct's defaults
+    for noisy in redraws(recs, clean, args.auto_redraws, np.random.default_rng(5), as_recorded=True):
+        b, se, orders, cover, route = fit(noisy, clean, s, False, True, coordination="auto")
+        auto_redraw.append((b, se, orders, cover, route))
+        print("auto redraw", b[:4], se[:4], orders, cover, route, flush=True)
     lines = ["# Noise on v and the damping law (issue 15)", "",
              (f"`python studies/velocity_noise.py --seeds {args.seeds} --redraws {args.redraws} --auto-redraws "
               f"{args.auto_redraws}` ({(time.time() - t0) / 60:.1f} min on the "

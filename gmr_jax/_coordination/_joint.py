@@ -631,8 +631,9 @@ def joint_coordinate(
     robust = v_rows is not None and SANDWICH
     covariance = lambda i: _covariance(i, theta, ainv, rss, edf, n, masks, cols, ys, w, gram, v_rows if robust else None)  # noqa: E731
     dropped_terms, ranked = [], bic  # `ranked`: the scores the alternatives below are weighed by
+    sigma2, cov_theta = covariance(best)
     if robust and ROBUST_VELOCITY_SET:
-        chosen = _robust_velocity_set(best, meta, lam_r, lam_d, admissible, theta, masks, n, covariance(best)[1])
+        chosen = _robust_velocity_set(best, meta, lam_r, lam_d, admissible, theta, masks, n, cov_theta)
         dropped_terms = sorted(set(meta[best][2]) - set(meta[chosen][2]))
         if dropped_terms:
             # the laws with a term the robust test rejected are out of the alternatives too (else the band takes the
@@ -640,9 +641,9 @@ def joint_coordinate(
             # score's best
             ranked = np.where([any(o in mt[2] for o in dropped_terms) for mt in meta], np.inf, bic)
             ranked[chosen] = bic[best]
-        best = chosen
+            best = chosen
+            sigma2, cov_theta = covariance(best)
     k, j, vel = meta[best]
-    sigma2, cov_theta = covariance(best)
     # map to monomial coefficients in x
     to_x = lambda deg: np.asarray(monomial_map(c, 2.0 * h, deg + 1)) @ cheb_to_monomial(deg)  # noqa: E731
     n_vel = max((*layout.vel, 1)) + 1

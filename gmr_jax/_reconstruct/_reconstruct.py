@@ -21,7 +21,7 @@ from .._coordination._joint import (
     row_filter,
 )
 from .._errors import GMRInputError
-from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, Library
+from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, Library, signed_power
 from .._fit._local_fit import AutoThreshold, LocalFit
 from .._fit._stls import STLS, compress, stls_qr
 from .._fit._threshold import default_thresholds, select_threshold
@@ -382,7 +382,7 @@ def _damping_force_rows(g: GlobalCoefficients, x, v) -> np.ndarray:
     ns, nv, npd = (np.asarray(a).shape[0] for a in (g.stiffness, g.velocity_damping, g.position_damping))
     rows = np.zeros((x.size, ns + nv + npd))
     for j in range(nv):
-        rows[:, ns + j] = np.sign(v) * np.abs(v) ** j
+        rows[:, ns + j] = signed_power(v, j)
     for j in range(npd):
         rows[:, ns + nv + j] = x**j * v
     return rows
