@@ -32,7 +32,6 @@ import warnings
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 import gmr_jax as g
@@ -110,26 +109,15 @@ CASES = [
 QUICK = [0, 7, 9, 15, 18]
 
 
-def _on_axis(xs, d, i):
-    return jnp.zeros((xs.size, d)).at[:, i].set(jnp.asarray(xs))
-
-
 def measure(model, system, i, n=401):
-    """Coverage, width and errors of DOF `i` (module docstring)."""
-    d = model.n_dof
+    """Coverage, width and errors of DOF `i` (module docstring; `gmr.metrics.band_coverage`)."""
     eq = system.equilibria[:, i]
     out = {}
-    for name, (lo, hi) in (("span", (eq.min(), eq.max())), ("box", tuple(system.x_range[i]))):
-        xs = np.linspace(lo, hi, n)
-        x = _on_axis(xs, d, i)
-        band = jax.vmap(lambda p: g.force_band(model, p, level=LEVEL))(x)
-        truth = np.asarray(jax.vmap(system.truth.restoring)(x))[:, i]
-        low, up = np.asarray(band.lower)[:, i], np.asarray(band.upper)[:, i]
-        out[f"cover_{name}"] = float(np.mean((truth >= low) & (truth <= up)))
+    for name, x_range in (("span", (eq.min(), eq.max())), ("box", tuple(system.x_range[i]))):
+        band = g.metrics.band_coverage(model, system.truth, i, x_range, n=n, level=LEVEL)
+        out[f"cover_{name}"] = band.share
         if name == "span":
-            scale = float(np.max(np.abs(truth)))
-            out["width"] = float(np.median(up - low)) / scale
-            out["max_err_span"] = float(np.max(np.abs(np.asarray(band.mean)[:, i] - truth))) / scale
+            out["width"], out["max_err_span"] = band.width, band.max_error
     out["restoring_error"] = g.metrics.restoring_error(model, system.truth, i, system.x_range[i])
     out["cover_damping"], out["width_damping"] = damping_band(model, system, i)
     return out
@@ -139,17 +127,10 @@ def damping_band(model, system, i: int, level: float = LEVEL) -> tuple[float, fl
     """The damping band of DOF `i` over the wells' span x v_range (41 x 40 points, v != 0, the other DOFs at 0):
     the share of the points where it holds the truth's damping force, and its median full width relative to the
     largest |truth| there."""
-    d = model.n_dof
     eq = system.equilibria[:, i]
-    xs = np.linspace(eq.min(), eq.max(), 41)
-    vs = np.linspace(*system.v_range[i], 41)
-    vs = vs[vs != 0]
-    xx, vv = (a.ravel() for a in np.meshgrid(xs, vs, indexing="ij"))
-    x, v = _on_axis(xx, d, i), _on_axis(vv, d, i)
-    band = jax.vmap(lambda p, q: g.force_band(model, p, q, part="damping", level=level))(x, v)
-    truth = np.asarray(jax.vmap(system.truth.damping)(x, v))[:, i]
-    low, up = np.asarray(band.lower)[:, i], np.asarray(band.upper)[:, i]
-    return float(np.mean((truth >= low) & (truth <= up))), float(np.median(up - low)) / float(np.max(np.abs(truth)))
+    band = g.metrics.band_coverage(model, system.truth, i, (eq.min(), eq.max()), system.v_range[i], part="damping",
+                                   level=level, n=41, n_v=41)
+    return band.share, band.width
 
 
 #: extra `reconstruct` keywords (`--no-velocity-eiv`)

@@ -11,7 +11,7 @@ its covariance `_joint._sandwich`), and with v replaced by its noise-free value 
 and compares the damping coefficients with the truth in the model's own standard errors
 (`GlobalModel.stderr`), with `coordination="joint"` so that every run takes the same route. Then, with
 `reconstruct`'s defaults (route "auto": the paper route's damping handed to the corrected joint regression where
-the noise of v moves it, `_reconstruct.V_NOISE_DAMPING`), the damping band per seed; and the scatter over fresh
+the noise of v moves it, `_reconstruct._velocity_noise.V_NOISE_DAMPING`), the damping band per seed; and the scatter over fresh
 draws of v's noise about one seed's clean v, through the joint route (x and a noise-free: the corrected
 estimator's own bias and calibration, the velocity set re-tested on its robust covariance,
 `_joint._robust_velocity_set`) and through the defaults (x and a as recorded: the damping band per draw).

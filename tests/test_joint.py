@@ -501,7 +501,7 @@ def test_a_velocity_term_is_kept_on_its_robust_covariance(monkeypatch):
     dropped, and the viscous term is unbiased (bistable joint, 10 v^3, 5 degrees, 30 dB on v, seed 4's sweeps with
     fresh draws of v's noise); the laws that hold it are no longer alternatives (rule 14 read them as better by 1-40
     in the score)."""
-    import gmr_jax._reconstruct._reconstruct as recon
+    import gmr_jax._reconstruct._velocity_noise as recon
     from gmr_jax._coordination import _joint
 
     s = g.systems.bistable_joint("position_independent")
@@ -546,14 +546,14 @@ def test_a_velocity_term_is_kept_on_its_robust_covariance(monkeypatch):
 
 @pytest.mark.slow  # two reconstructions of a velocity_noise-study case (~20 s)
 def test_the_noise_of_a_measured_v_hands_the_damping_to_the_joint_regression(monkeypatch):
-    """`_reconstruct.V_NOISE_DAMPING`: bistable joint, 10 v^3, 5 degree sweeps, 30 dB, seed 1 (`studies/
+    """`_reconstruct._velocity_noise.V_NOISE_DAMPING`: bistable joint, 10 v^3, 5 degree sweeps, 30 dB, seed 1 (`studies/
     velocity_noise.py`): the paper route's damping is admissible, so it was kept, from local fits that take the
     noisy v as exact (v^3 attenuated, its share leaked into v); its band held the truth on 64 % of the span x
     v_range. The noise moves the joint damping law by more than a standard error, so the corrected joint damping
     replaces it, and says so: 100 %."""
     from _truth import damping_coverage  # tests/_truth.py
 
-    import gmr_jax._reconstruct._reconstruct as recon
+    import gmr_jax._reconstruct._velocity_noise as recon
 
     system = g.systems.bistable_joint("position_independent")
     recs = g.systems.make_recordings(system, np.deg2rad(5.0), snr_db=30.0, seed=1)

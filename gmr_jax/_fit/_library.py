@@ -26,6 +26,17 @@ def signed_power(v, j: int, sign_eps: float = 0.0):
     return s * xp.abs(v) ** j
 
 
+def damping_columns(x, v, n_velocity: int, n_position: int, sign_eps: float = 0.0):
+    """The global model's damping basis at (x, v) (Eqs. 1, 7), on a new last axis: sgn(v)|v|^j for the velocity
+    damping B_j, j < `n_velocity`, then x^j v for the position damping C_j, j < `n_position` (j = 0 included, as
+    `GlobalModel.position_damping` holds it). `x`, `v` broadcast together; NumPy in, NumPy out, JAX otherwise.
+    The one definition of the damping force's rows: the force is `damping_columns(...) @ [B; C]`."""
+    xp = _xp(v)
+    x, v = xp.broadcast_arrays(xp.asarray(x), xp.asarray(v))
+    cols = [signed_power(v, j, sign_eps) for j in range(n_velocity)] + [x**j * v for j in range(n_position)]
+    return xp.stack(cols, axis=-1) if cols else xp.zeros(v.shape + (0,), v.dtype)
+
+
 class Library(eqx.Module):
     """Polynomial library of the paper, Eqs. (5)-(7).
 

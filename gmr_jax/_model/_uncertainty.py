@@ -14,7 +14,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._errors import GMRInputError
 from .._fit._householder import psd_root
-from .._fit._library import signed_power
+from .._fit._library import damping_columns
 from ._model import GlobalModel, coefficients
 
 PARTS = ("restoring", "damping", "total")
@@ -56,10 +56,8 @@ def basis(model: GlobalModel, x: Float[Array, " dof"], v: Float[Array, " dof"] |
     restoring = jnp.concatenate([_powers(x, ns), zero], axis=1)
     if part == "restoring":
         return restoring
-    v = jnp.asarray(v, x.dtype)
-    vel = jnp.stack([signed_power(v, j, model.sign_eps) for j in range(nv)], axis=1)
-    pos = _powers(x, npd) * v[:, None]
-    damping = jnp.concatenate([jnp.zeros(x.shape + (ns,), x.dtype), vel, pos], axis=1)
+    cols = damping_columns(x, jnp.asarray(v, x.dtype), nv, npd, model.sign_eps)
+    damping = jnp.concatenate([jnp.zeros(x.shape + (ns,), x.dtype), cols], axis=1)
     return damping if part == "damping" else restoring + damping
 
 

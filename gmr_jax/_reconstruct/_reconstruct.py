@@ -21,7 +21,7 @@ from .._coordination._joint import (
     row_filter,
 )
 from .._errors import GMRInputError
-from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, Library, signed_power
+from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, Library
 from .._fit._local_fit import AutoThreshold, LocalFit
 from .._fit._stls import STLS, compress, stls_qr
 from .._fit._threshold import default_thresholds, select_threshold
@@ -31,7 +31,16 @@ from .._recordings._derivatives import TONAL, band_edge, tonal_fraction
 from .._recordings._recording import Recording, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
-from . import _design_law, _filter_gain, _local_rules, _noise, _resolution, _sanity, _shape_prior
+from . import (
+    _design_law,
+    _filter_gain,
+    _local_rules,
+    _noise,
+    _resolution,
+    _sanity,
+    _shape_prior,
+    _velocity_noise,
+)
 from ._damping_slopes import add_slope_vectors, slope_vectors, unresolved_slopes
 from ._degree import (
     averaged_parts,
@@ -59,6 +68,7 @@ from ._local_rules import (
 from ._sanity import GMRDataWarning
 from ._slow import band_rows, edge_weights, restore_slow, segments
 from ._truncation import with_truncation
+from ._velocity_noise import recorded_speed
 
 #: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
 DEFAULT_SOLVER = STLS(threshold=0.1, alpha=0.0, normalize_columns=True, unbias=True)
@@ -282,17 +292,12 @@ def training_scores(model: GlobalModel, recs, masses, topology, rows=None) -> di
     return out
 
 
-def _recorded_speed(vs, w) -> float:
-    """The largest recorded |v| of one DOF (padded per-well arrays, `w` 0 on padding)."""
-    return float(np.max(np.abs(np.asarray(vs)) * (np.asarray(w) > 0)))
-
-
 def _speed(fits: LocalFit, vs, w, mass: float, library: Library) -> float:
     """A generous bound on the speeds a model of this DOF will see: 3 x the recorded ones, or
     the interwell distance times the stiffest well's angular frequency."""
     eq = np.asarray(fits.equilibrium)
     k_max = float(np.max(np.abs(np.asarray(fits.coef)[:, library.column(STIFFNESS, 1)])))
-    return max(3.0 * _recorded_speed(vs, w), float(np.ptp(eq)) * np.sqrt(k_max / mass))
+    return max(3.0 * recorded_speed(vs, w), float(np.ptp(eq)) * np.sqrt(k_max / mass))
 
 
 #: auto coordination: on a paper route whose restoring shape alone is inadmissible and untested by
@@ -367,71 +372,6 @@ def _paper_route_faults(coord: Solution, fits: LocalFit, xs, vs, ys, w, speed: f
 #: from the local fits) exceed this share of it between the wells (RMS): a term kept at a few standard
 #: errors, exact in the interpolant (`_undetermined`)
 UNDETERMINED = 0.25
-#: the paper route's damping gives way to the joint regression's (the restoring force kept) where v is measured
-#: with white noise at every well (`_noise.v_noise_variance`) and that noise moves the damping law by more than
-#: this many of its standard errors (`_damping_moved`; 0: off): the local fits take v as exact, so the noise
-#: attenuates their v^3 and leaks into their v, where the joint regression corrects for it (`_joint._velocity_noise`).
-#: Bistable joint, 10 v^3, 5 degrees, 30 dB, seed 1: the paper route's damping band held the truth on 64 % of the
-#: wells' span x v_range, the corrected joint damping's on 100 %
-V_NOISE_DAMPING = 1.0
-
-
-def _damping_force_rows(g: GlobalCoefficients, x, v) -> np.ndarray:
-    """Rows that map the flat coefficients (stiffness, velocity damping, position damping) to the damping force
-    at the points (x, v): sgn(v)|v|^j for B_j, x^j v for C_j."""
-    ns, nv, npd = (np.asarray(a).shape[0] for a in (g.stiffness, g.velocity_damping, g.position_damping))
-    rows = np.zeros((x.size, ns + nv + npd))
-    for j in range(nv):
-        rows[:, ns + j] = signed_power(v, j)
-    for j in range(npd):
-        rows[:, ns + nv + j] = x**j * v
-    return rows
-
-
-def _v_noise_negligible(fits: LocalFit, v_noise, vs, w, library: Library) -> bool:
-    """Whether the noise of v cannot move the damping by a tenth of `V_NOISE_DAMPING` standard errors, without the
-    regression that measures it (`_damping_moved`), on a heuristic bound: where every damping term the local fits kept
-    is linear in v
-    (c v, c x^j v), that noise only attenuates them, by s^2 / <v^2> of themselves, so their largest |t| times the
-    largest such ratio over the wells bounds the move (taken twice); a term nonlinear in v (Coulomb, v|v|, v^3)
-    also leaks into the others, by up to 50 x that product (bistable joint, 10 v^3, 30 dB, seed 1: 0.091, moved by
-    4.6 standard errors), and is always measured. 5-cell Kresling, viscous, 60 dB: products 0.005-0.007 (measured
-    moves 0.002-0.003), skipped."""
-    terms = library.terms()
-    damping = np.array([phys in (VELOCITY_DAMPING, POSITION_DAMPING) for phys, _ in terms])
-    nonlinear = np.array([phys == VELOCITY_DAMPING and k != 1 for phys, k in terms])
-    coef, cov = np.asarray(fits.coef), np.asarray(fits.covariance)
-    if np.any(coef[:, nonlinear] != 0):
-        return False
-    var = np.diagonal(cov, axis1=1, axis2=2)
-    t = np.where(damping[None, :] & (var > 0), np.abs(coef) / np.sqrt(np.where(var > 0, var, 1.0)), 0.0)
-    vs, w = np.asarray(vs), np.asarray(w)
-    power = np.array([np.sum(w[k] * vs[k] ** 2) / max(np.sum(w[k]), 1e-300) for k in range(vs.shape[0])])
-    ratio = np.max(np.asarray(v_noise, float) / np.where(power > 0, power, np.inf))
-    return bool(2.0 * ratio * float(t.max(initial=0.0)) < 0.1 * V_NOISE_DAMPING)
-
-
-def _damping_moved(corrected: Solution, fits: LocalFit, vs, w) -> float:
-    """RMS over the wells' span x the recorded speeds (21 x 20 points) of what the noise of v moves the joint
-    regression's damping force by, uncorrected (`_joint`'s `joint_velocity_noise_shift`), in its standard errors
-    (`V_NOISE_DAMPING`); 0 where the correction did not apply."""
-    g = corrected.value
-    n_damp = np.asarray(g.velocity_damping).shape[0] + np.asarray(g.position_damping).shape[0]
-    shift = np.asarray(corrected.stats.get("joint_velocity_noise_shift", []), float)[-n_damp:]
-    eq = np.asarray(fits.equilibrium)
-    top = _recorded_speed(vs, w)
-    if not corrected.stats.get("joint_velocity_noise", False) or shift.size != n_damp or top <= 0:
-        return 0.0
-    xx, vv = (a.ravel() for a in np.meshgrid(np.linspace(eq.min(), eq.max(), 21),
-                                             np.linspace(-top, top, 20), indexing="ij"))
-    rows = _damping_force_rows(g, xx, vv)
-    ns = rows.shape[1] - n_damp
-    diff = rows[:, ns:] @ shift
-    se = np.sqrt(np.maximum(np.einsum("ip,pq,iq->i", rows, np.asarray(corrected.aux), rows), 0.0))
-    ok = se > 0
-    return float(np.sqrt(np.mean((diff[ok] / se[ok]) ** 2))) if ok.any() else 0.0
-
-
 def _undetermined(coord: Solution, fits: LocalFit) -> float:
     """Two standard errors of the paper route's restoring force over the wells' span (RMS; the coordination's
     covariance, propagated from the local fits), relative to the force's RMS there; 0 where not finite. Single-tone
@@ -707,15 +647,15 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                         why = why + [f"kept: {reason}"]
                 if route == "gls" and faults["damping"]:
                     coord, route = _joint(fits, xs, vs, ys, w, speed, restoring=paper, rows=rows, segs=segs, gain=gain, v_noise=v_noise), "gls + joint damping"
-                elif (route == "gls" and V_NOISE_DAMPING and v_noise is not None and gain is None and segs is None
-                      and all(v is not None for v in v_noise) and not _v_noise_negligible(fits, v_noise, vs, w, library)):
+                elif route == "gls" and segs is None and _velocity_noise.worth_measuring(fits, v_noise, vs, w, library,
+                                                                                          gain):
                     # ... and where the noise of a measured v, which the local fits take as exact, moves the damping
                     # (not where the columns pass a filter gain or a slow band: the joint regression does not correct
                     # for it there)
                     corrected = _joint(fits, xs, vs, ys, w, speed, restoring=paper, rows=rows, segs=segs, gain=gain,
                                        v_noise=v_noise)
-                    moved = _damping_moved(corrected, fits, vs, w)
-                    if (moved > V_NOISE_DAMPING and corrected.result == RESULTS.successful
+                    moved = _velocity_noise.moved(corrected, fits, vs, w)
+                    if (moved > _velocity_noise.V_NOISE_DAMPING and corrected.result == RESULTS.successful
                             and corrected.stats.get("joint_admissible", False)):
                         coord, route = corrected, "gls + joint damping"
                         why = why + [f"damping: the noise of the measured v moves it by {moved:.3g} standard errors "
@@ -951,7 +891,7 @@ def reconstruct(
       truth on 100 % of its span instead of 60 % (`studies/velocity_noise.py`, `studies/coverage.py`).
       A velocity term the score keeps is tested again on that covariance (`_joint._robust_velocity_set`).
       On route "auto", the paper route's damping (local fits that take v as exact) gives way to the
-      corrected joint damping where the noise moves it by more than a standard error (`V_NOISE_DAMPING`).
+      corrected joint damping where the noise moves it by more than a standard error (`_velocity_noise.V_NOISE_DAMPING`).
       Reported per well in `dofs[i].stats["velocity_noise"]`; False: the velocity columns taken
       as measured.
     - `throw`: raise `GMRComputationError` on a numerical failure (a local fit or the
@@ -1139,7 +1079,7 @@ def reconstruct(
                 i, np.asarray(g.velocity_damping), np.asarray(g.position_damping),
                 coord.stats["joint_damping_alternative_velocity"], coord.stats["joint_damping_alternative_position"],
                 coord.stats["joint_damping_alternative_orders"], float(coord.stats["joint_damping_alternative_delta"]),
-                _recorded_speed(vs, w), _speed(fits, vs, w, float(masses[i]), library), float(xall.min()),
+                recorded_speed(vs, w), _speed(fits, vs, w, float(masses[i]), library), float(xall.min()),
                 float(xall.max()))
         # a DOF that borrowed was coordinated with odd degrees only: its discrepancy is that degree choice's
         g, cov_i = _calibrated(coord, fits, library, route, paper_sound, confining or any(borrowed))

@@ -20,6 +20,7 @@ import numpy as np
 
 from .._errors import GMRDataWarning as GMRDataWarning  # noqa: F401  (re-exported)
 from .._errors import GMRInputError
+from .._fit._library import damping_columns
 
 
 #: Percentile of |x - mean| taken as a recording's vibration amplitude (robust to a few spikes).
@@ -655,7 +656,7 @@ def check_damping_choice(dof: int, velocity_damping, position_damping, alt_veloc
     vs = np.linspace(0.0, speed, 401)[None, 1:]
 
     def force(bb, cc):  # (x, v) grid, v > 0
-        return sum(bb[j] * vs**j for j in range(n_b)) + np.polynomial.polynomial.polyval(xs, cc) * vs
+        return damping_columns(xs, vs, n_b, n_c) @ np.concatenate([bb, cc])
 
     d0, d1 = force(b, c), force(b + db, c + dc)
     part = np.max(np.abs(d1 - d0) / np.maximum(np.abs(d0), 1e-300), axis=0) > DAMPING_SPREAD
