@@ -146,6 +146,8 @@ CASES = [
     ("actuate: monostable cells", lambda: ["actuate", F("chain"), "--target", "1-1", "--x-range=0.0:0.05",
                                            "--out", OUT()], 2, r"fewer than two stable wells"),
     # fit
+    ("fit: --out in a missing folder", lambda: ["fit", F("rec_npz"), F("rec_npz"), "--out", "/nonexistent/dir/m.json"],
+     2, r"the folder /nonexistent/dir does not exist"),
     ("fit: NaN in x", lambda: ["fit", F("nan_npz"), F("rec_npz"), "--out", OUT("m.json")], 2, r"NaN"),
     ("fit: non-uniform time", lambda: ["fit", F("nonuniform_npz"), F("rec_npz"), "--out", OUT("m.json")], 2,
      r"not uniformly sampled"),

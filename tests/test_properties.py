@@ -267,14 +267,17 @@ def recordings(draw, csv=False):
     dt = draw(st.floats(1e-4, 1e-1))
     t = t0 + dt * np.arange(n)
     vals = arrays(np.float64, st.just((n, d)), elements=finite)
-    x = draw(vals)
-    for k in range(d):  # a constant displacement column is not a recording (nothing to fit)
-        if np.all(x[:, k] == x[0, k]):
-            x[0, k] = 1.0 if x[1, k] != 1.0 else 0.0
+    def varying(a):  # a constant x (nothing to fit), v or a column (a dead sensor) is not a recording
+        for k in range(d):
+            if np.all(a[:, k] == a[0, k]):
+                a[0, k] = 1.0 if a[1, k] != 1.0 else 0.0
+        return a
+
+    x = varying(draw(vals))
     rec = {"t": t, "x": x}
     for key in ("v", "a", "force"):
         if draw(st.booleans()):
-            rec[key] = draw(vals)
+            rec[key] = varying(draw(vals)) if key != "force" else draw(vals)
     if draw(st.booleans()):
         rec["base_acc"] = draw(arrays(np.float64, st.just((n,)), elements=finite))
     if not csv and draw(st.booleans()):

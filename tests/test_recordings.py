@@ -426,3 +426,58 @@ def test_one_dof_csv_with_plain_column_names(tmp_path):
     np.savetxt(tmp_path / "twice.csv", np.column_stack([t, x, x]), delimiter=",", header="t,x,x0", comments="")
     with pytest.raises(g.GMRInputError, match=r"\['x0'\] appear more than once.*x, v, a, f, force are read as"):
         g.load_recording(tmp_path / "twice.csv")
+
+
+def test_lab_csv_headers_units_case_time_and_equilibrium(tmp_path):
+    """Headers as labs write them read without a mapping: any case, `time` for t, a unit in brackets or
+    parentheses ('v [m/s]'), the time column's unit applied ('t [ms]': the stamps scaled to s); an `equilibrium`
+    column (one value repeated) is the recording's equilibrium; a varying one, an unknown time unit and a
+    header-less file are refused with the fix."""
+    t = np.arange(0.0, 2.0, 1e-3)
+    x, v = 0.1 * np.sin(5 * t), 0.5 * np.cos(5 * t)
+    base = np.sin(t)
+    plain = tmp_path / "plain.csv"
+    np.savetxt(plain, np.column_stack([t, x, v, base]), delimiter=",", header="t,x,v,base_acc", comments="")
+    ref = g.load_recording(plain)
+    for name, header, scale in (("case.csv", "Time,X,V,Base_Acc", 1.0), ("units.csv", "t [s],x [m],v (m/s),base_acc", 1.0),
+                                ("ms.csv", "t [ms],x,v,base_acc", 1e3)):
+        np.savetxt(tmp_path / name, np.column_stack([t * scale, x, v, base]), delimiter=",", header=header,
+                   comments="")
+        rec = g.load_recording(tmp_path / name)
+        for k in ("t", "x", "v", "base_acc"):
+            np.testing.assert_allclose(getattr(rec, k), getattr(ref, k), rtol=1e-12, atol=1e-15, err_msg=name)
+    np.savetxt(tmp_path / "eq.csv", np.column_stack([t, v, base, np.full_like(t, 0.25)]), delimiter=",",
+               header="t,v,base_acc,equilibrium", comments="")
+    rec = g.load_recording(tmp_path / "eq.csv")
+    assert rec.derived == ("x",) and rec.equilibrium.tolist() == [0.25]
+    np.savetxt(tmp_path / "eqvar.csv", np.column_stack([t, v, base, t]), delimiter=",",
+               header="t,v,base_acc,equilibrium", comments="")
+    with pytest.raises(g.GMRInputError, match="'equilibrium' column varies over the record"):
+        g.load_recording(tmp_path / "eqvar.csv")
+    np.savetxt(tmp_path / "h.csv", np.column_stack([t, x]), delimiter=",", header="t [hours],x", comments="")
+    with pytest.raises(g.GMRInputError, match=r"time column's unit 'hours' is not one of"):
+        g.load_recording(tmp_path / "h.csv")
+    np.savetxt(tmp_path / "nohdr.csv", np.column_stack([t, x]), delimiter=",")
+    with pytest.raises(g.GMRInputError, match="the first line holds numbers .* not column names"):
+        g.load_recording(tmp_path / "nohdr.csv")
+
+
+def test_dead_channels_and_repeated_time_stamps_are_named(tmp_path):
+    """A constant v or a column (a dead sensor) is refused by name, not left to fail in the fit; a repeated time
+    stamp is called a duplicated row, a stamp going back a new run."""
+    from gmr_jax._recordings._recording import validate  # what load_recording and reconstruct run
+
+    t = np.arange(0.0, 2.0, 1e-3)
+    x = 0.1 * np.sin(5 * t)
+    with pytest.raises(g.GMRInputError, match=r"v of column 0 is constant \(0 throughout\): a dead or disconnected"):
+        validate(g.Recording(t=t, x=x, v=np.zeros_like(t)))
+    with pytest.raises(g.GMRInputError, match=r"a of column 0 is constant"):
+        validate(g.Recording(t=t, x=x, a=np.full_like(t, 9.81)))
+    td = t.copy()
+    td[500] = td[499]
+    with pytest.raises(g.GMRInputError, match=r"sample 500 repeats the time stamp of sample 499.*duplicated row"):
+        validate(g.Recording(t=td, x=x))
+    tb = t.copy()
+    tb[500:] -= 1.0
+    with pytest.raises(g.GMRInputError, match=r"sample 500 .* comes before sample 499.*sort the rows"):
+        validate(g.Recording(t=tb, x=x))

@@ -156,12 +156,17 @@ def test_13_consistent_units_are_silent(name):
 
 def test_13_columns_in_other_units_are_reported(nes):
     """A time column in ms, accelerations in g, x in mm, a velocity of the opposite sign: each is
-    reported with its factor (checked against the scale applied), and reconstruct emits it."""
+    reported with its factor (checked against the scale applied), and reconstruct emits it. A time column in ms
+    (v 1000 x and a 1e6 x the derivatives of x) is one message that names t and the fix."""
     _, recs = nes
     r = recs[0]
     topo = g.Independent()
+    ms = _sanity.check_units("nes_S1", dataclasses.replace(r, t=r.t * 1e3), topo)
+    assert len(ms) == 1 and "the time column is in 1/1000 of a second" in ms[0] and "'t=t/1000'" in ms[0], ms
+    assert [float(v) for v in (ms[0].split(" is ")[1].split(" times")[0],
+                               ms[0].split("acceleration ")[1].split(" times")[0])] == pytest.approx([1e3, 1e6],
+                                                                                                   rel=0.03)
     cases = {
-        "t in ms": (dataclasses.replace(r, t=r.t * 1e3), {"v": 1e3, "a": 1e6}),
         "a in g": (dataclasses.replace(r, a=r.a / 9.80665, base_acc=r.base_acc / 9.80665), {"a": 1 / 9.80665}),
         "x in mm": (dataclasses.replace(r, x=r.x * 1e3), {"v": 1e-3, "a": 1e-3}),
         "v reversed": (dataclasses.replace(r, v=-r.v), {"v": -1.0}),
@@ -172,7 +177,7 @@ def test_13_columns_in_other_units_are_reported(nes):
         assert set(got) == set(want), (label, msgs)
         for key, factor in want.items():
             assert got[key] == pytest.approx(factor, rel=0.03), (label, key, got[key])
-    assert "as with t in ms or x in mm" in _sanity.check_units("nes_S1", cases["t in ms"][0], topo)[0]
+    assert "as with t in ms or x in mm" in _sanity.check_units("nes_S1", cases["x in mm"][0], topo)[0]
     assert "accelerations in g" in _sanity.check_units("nes_S1", cases["a in g"][0], topo)[0]
     assert "opposite sign" in _sanity.check_units("nes_S1", cases["v reversed"][0], topo)[0]
     _, msgs = _fit([cases["a in g"][0], *recs[1:]])

@@ -15,14 +15,16 @@ import numpy as np
 
 from .._errors import GMRInputError
 from .._reconstruct._sanity import GMRDataWarning
-from ._args import add_columns_option, load_recordings, positive_int
+from ._args import add_columns_option, load_recordings, output_file, positive_int
 from ._progress import stage
 from ._show import _term_table, format_coordination, format_eiv, format_shared_design
 
 
 def register(sub):
     f = sub.add_parser("fit", help="reconstruct a global model from recordings (one per equilibrium)")
-    f.add_argument("recordings", nargs="+", help="NPZ, CSV or MATLAB .mat recordings")
+    f.add_argument("recordings", nargs="+", help="NPZ, CSV or MATLAB .mat recordings, one per well (CSV: a header "
+                   "row naming t, x, v, a, base_acc or force, and equilibrium for a velocity-only file; x0, x1, ... "
+                   "for several DOFs; units in brackets allowed, 't [ms]' converted; other names: --columns)")
     f.add_argument("--out", required=True, help="model JSON to write (gmr-model/1)")
     add_columns_option(f)
     f.add_argument("--method", choices=["gmr", "gmc-sindy"], default="gmr")
@@ -115,6 +117,7 @@ def figure_path(out: str, figure: str | None) -> Path:
 def run(args) -> int:
     import gmr_jax as gmr
 
+    output_file(args.out)  # a folder that does not exist fails before the fit, not after it
     png = None if args.no_figure else figure_path(args.out, args.figure)  # a bad name fails before the fit
     stage(f"loading {len(args.recordings)} recording(s)")
     recs, load_warnings = load_recordings(args.recordings, args.columns)
@@ -169,7 +172,8 @@ def run(args) -> int:
         print(line)
     for i, rep in enumerate(st["dofs"]):
         if rep.equilibria.size:
-            print(f"  DOF {i}: equilibria {np.round(rep.equilibria, 6).tolist()}, global orders "
+            print(f"  DOF {i}: wells recorded about x = {np.round(rep.equilibria, 6).tolist()} (the records' means; "
+                  f"the model's own equilibria: gmr show), global orders "
                   f"K_r={rep.stats['K_r']}, K_d={rep.stats['K_d']}")
     for line in format_coordination(routes):
         print(line)

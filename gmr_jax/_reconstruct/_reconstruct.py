@@ -66,9 +66,13 @@ from ._local_rules import (
     low_order_terms,
 )
 from ._sanity import GMRDataWarning
-from ._slow import band_rows, edge_weights, restore_slow, segments
+from ._slow import band_rows, curvature_only, edge_weights, restore_slow, segments
 from ._truncation import with_truncation
 from ._velocity_noise import recorded_speed
+
+#: an x integrated from v or a hands the coordination each well's F, F', F'' only (`_slow.curvature_only`; a module
+#: switch, for the studies' before/after and the tests' teeth)
+INTEGRATED_CONDITIONS = True
 
 #: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
 DEFAULT_SOLVER = STLS(threshold=0.1, alpha=0.0, normalize_columns=True, unbias=True)
@@ -96,8 +100,9 @@ def _resolve(recordings, masses, topology, min_recordings=2, what="fit", exclude
             raise GMRInputError(
                 f"{r.name}: x was integrated from {r.integration['from']} (no displacement sensor), so the "
                 f"equilibrium it vibrated about is unobservable; a global model needs where each equilibrium "
-                f"is: give it as the recording's 'equilibrium' (NPZ key, Recording(equilibrium=...), or "
-                f"--columns equilibrium=VALUE), or record x")
+                f"is: give each recording its rest position as 'equilibrium' (a CSV column 'equilibrium' that "
+                f"repeats it, an NPZ key, or Recording(equilibrium=...); --columns equilibrium=VALUE gives every "
+                f"file the same value, so it fits one well only), or record x")
         if r.n_dof != d:
             raise GMRInputError(f"{r.name}: has {r.n_dof} DOFs but {recs[0].name} has {d}")
     topology = as_topology(("chain" if d > 1 else "independent") if topology is None else topology)
@@ -1030,6 +1035,8 @@ def reconstruct(
         borrowed, design_why = [], None
         if plan[i] is not None:
             fits, borrowed = _borrow(fits, plan[i], xs, vs, ys, w, library, x_noises[i], band)
+        if segs_all[i] is not None and INTEGRATED_CONDITIONS:  # x integrated: F, F', F'' (`_slow.curvature_only`)
+            fits = curvature_only(fits, library)
         say(f"{f'DOF {i} ({i + 1}/{d}): ' if d > 1 else ''}coordination ({coordination})")
         coord, route, why, paper_sound, confining, found = _coordinate_dof(
             fits, xs, vs, ys, w, library, coordination, float(masses[i]), i, odd_only=any(borrowed),
@@ -1040,6 +1047,8 @@ def reconstruct(
             # 1 mm, seed 3, cell 4: an outward-turning nonic, then a joint law 86 % off)
             design_why = "the borrowed orders gave an inadmissible law: " + "; ".join(why[:1])
             fits, borrowed = data_fits, []
+            if segs_all[i] is not None and INTEGRATED_CONDITIONS:
+                fits = curvature_only(fits, library)
             coord, route, why, paper_sound, confining, found = _coordinate_dof(
                 fits, xs, vs, ys, w, library, coordination, float(masses[i]), i, x_noise=x_noises[i],
                 rows=row_filters[i], band=band, segs=segs_all[i], gain=gains[i], v_noise=v_noises[i])

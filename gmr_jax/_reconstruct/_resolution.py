@@ -138,17 +138,22 @@ class WellResolution:
         if not miss:
             return None
         names = ", ".join(NAMES[t.order] for t in miss)
-        worst = max(miss, key=lambda t: t.advised_ratio if t.advised_ratio is not None else np.inf)
-        k, rho = worst.order, worst.rho
+        high = [t for t in miss if t.order >= 2]  # F' (order 1): amplitude does not change its standard error
+        worst = max(high or miss, key=lambda t: t.advised_ratio if t.advised_ratio is not None else np.inf)
+        k, rho = worst.order, max(t.rho for t in miss)  # the samples or SNR that resolve every missing order
         parts = []
-        if worst.advised_ratio is not None and worst.advised_ratio <= MAX_ADVISED_RATIO:
+        if len(high) < len(miss):
+            parts.append(f"more amplitude does not help {NAMES[1]} at a fixed SNR (its standard error does not fall "
+                         f"with the amplitude)")
+        if high and worst.advised_ratio is not None and worst.advised_ratio <= MAX_ADVISED_RATIO:
             parts.append(f"excite it to about {100 * worst.advised_ratio:.2g} % of the interwell distance "
                          f"(now {100 * self.ratio:.2g} %; x{worst.advised_ratio / self.ratio:.2g} the amplitude)")
-        else:
+        elif high:
             parts.append(f"more amplitude alone would leave the small-vibration regime (it would need "
                          f"{'>' if worst.advised_ratio is None else ''}"
                          f"{100 * (worst.advised_ratio or MAX_ADVISED_RATIO):.2g} % of the interwell distance)")
-        parts.append(f"or record {rho**2:.2g} x as many samples, or {20 * np.log10(rho):.2g} dB more SNR")
+        more, db = np.ceil(10.0 * rho**2) / 10.0, np.ceil(200.0 * np.log10(max(rho, 1.0))) / 10.0  # rounded up
+        parts.append(f"or record {more:.3g} x as many samples, or {db:.3g} dB more SNR")
         gb = G_BROADBAND.get(k, G_BROADBAND[3])
         if worst.g < 0.8 * gb:
             parts.append(f"the record is nearly sinusoidal (its q^{k} is {100 * (1 - worst.g ** 2):.0f} % collinear with "
@@ -377,9 +382,10 @@ def resolution_report(recs, targets, groups, reports, model, library, masses, to
                 needed = k <= NEEDED_ORDER
                 useful = needed or share >= BOUND_FRACTION
                 rho, ratio = 1.0, None
-                if useful and not bounded and k >= 2 and np.isfinite(impact):
+                if useful and not bounded and k >= 1 and np.isfinite(impact):
                     rho = max(SAFETY * impact / BOUND_FRACTION, 1.0)
-                    ratio = amp / dist * rho ** (1.0 / (k - 1)) if dist > 0 else None
+                    # F' (k = 1): its standard error does not fall with the amplitude at a fixed SNR
+                    ratio = amp / dist * rho ** (1.0 / (k - 1)) if dist > 0 and k >= 2 else None
                 rows.append(TermResolution(order=k, coef=c, se=s, se_h=se_h, global_coef=a_g, g=gk,
                                            significant=bool(significant), bounded=bounded, needed=bool(needed),
                                            impact=float(impact), share=float(share), rho=float(rho),

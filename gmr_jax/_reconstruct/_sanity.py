@@ -258,7 +258,7 @@ def check_units(name: str, rec, topology) -> list[str]:
         if topology.name == "chain":
             rel = np.diff(rel, axis=1, prepend=0.0)  # cell i: a_i - a_(i-1), the cell's x_i''
         pairs.append(("a", 2, rel))
-    out = []
+    out, scales = [], {}
     for key, order, meas in pairs:
         for i, w in enumerate(windows):
             if w is None or w > x.shape[0]:
@@ -278,6 +278,7 @@ def check_units(name: str, rec, topology) -> list[str]:
             what = "velocity" if key == "v" else "relative acceleration (a minus the base's)"
             deriv = "first" if order == 1 else "second"
             hint = _scale_hint(s)
+            scales[(i, key)] = (s, len(out))
             out.append(
                 f"{name}: the measured {what} of DOF {i} is {s:.4g} times the {deriv} derivative of its x "
                 f"(correlation {abs(r):.3f}{'; ' + hint if hint else ''}): the columns' units or signs disagree, "
@@ -285,7 +286,26 @@ def check_units(name: str, rec, topology) -> list[str]:
                 f"{'damping' if key == 'v' else 'restoring and damping'} forces): fix the scale of t, x or {key} "
                 f"(e.g. --columns '{key}=COLUMN*FACTOR')"
             )
-    return out
+    return _time_unit(name, out, scales)
+
+
+def _time_unit(name: str, out: list[str], scales: dict) -> list[str]:
+    """Rule 13's messages, where v is s times x' and a is s^2 times x'' on a DOF (within `UNITS_FACTOR`), as one:
+    the time column is in 1/s seconds (t in ms: v 1000 x, a 1e6 x), and v and a are right."""
+    for (i, key), (sv, kv) in sorted(scales.items()):
+        if key != "v" or (i, "a") not in scales or sv <= 0:
+            continue
+        sa, ka = scales[(i, "a")]
+        if sa <= 0 or abs(np.log(sa) - 2.0 * np.log(sv)) > np.log(UNITS_FACTOR):
+            continue
+        factor = 10.0 ** round(np.log10(sv)) if abs(np.log10(sv) - round(np.log10(sv))) < 0.05 else sv
+        out[kv] = (f"{name}: the measured velocity of DOF {i} is {sv:.4g} times the derivative of its x and the "
+                   f"relative acceleration {sa:.4g} times its second derivative ({sv:.4g}^2 = {sv * sv:.4g}): the time "
+                   f"column is in 1/{factor:.4g} of a second (ms for 1000), not in s, and the fit would take the "
+                   f"rest as consistent; give t in seconds (e.g. --columns 't=t/{factor:.4g}', or the unit in the "
+                   f"header, 't [ms]')")
+        out[ka] = None
+    return [m for m in out if m is not None]
 
 
 def check_swings(dof: int, names, xs, labels, equilibria, stiffness) -> tuple[list[str], set]:

@@ -3,6 +3,7 @@
 import csv
 import io
 import os
+import re
 import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -296,10 +297,22 @@ def validate(rec: Recording, src: str = "recording", min_samples: int = MIN_SAMP
                 f"{src}: x of column {k} is constant ({x[0, k]:g} throughout): nothing to fit; "
                 f"check that sensor's column or drop that DOF"
             )
+    for key in ("v", "a"):  # a dead channel: a constant that the fit would take as a measured signal
+        val = out.get(key)
+        for k in range(0 if val is None else val.shape[1]):
+            if val.shape[0] and np.all(val[:, k] == val[0, k]):
+                raise GMRInputError(
+                    f"{src}: {key} of column {k} is constant ({val[0, k]:g} throughout): a dead or disconnected "
+                    f"sensor? check that column" + ("" if "x" in rec.derived else
+                                                    f", or leave '{key}' out of the file (it is then estimated from x)")
+                )
     dt = np.diff(t)
     if np.any(dt <= 0):
         i = int(np.argmax(dt <= 0))
-        raise GMRInputError(f"{src}: 't' is not strictly increasing (at sample {i + 1})")
+        what = (f"sample {i + 1} repeats the time stamp of sample {i} ({t[i]:g}): a duplicated row? remove "
+                f"repeated rows" if dt[i] == 0 else f"sample {i + 1} ({t[i + 1]:g}) comes before sample {i} "
+                f"({t[i]:g}): sort the rows by time, or split the file where a new run starts")
+        raise GMRInputError(f"{src}: 't' is not strictly increasing: {what}")
     out = _uniform_time(out, _stamp_resolution(rec.t, t), src)
     return replace(rec, **out)
 
@@ -386,7 +399,7 @@ def save_recording(rec: Recording, path) -> None:
 
 #: CSV headers of a one-DOF recording read as the numbered columns (an extension of the contract's
 #: t, x0.., v0.., a0.., f0..: the names lab files and the NPZ keys use)
-_CSV_ALIASES = {"x": "x0", "v": "v0", "a": "a0", "f": "f0", "force": "f0"}
+_CSV_ALIASES = {"x": "x0", "v": "v0", "a": "a0", "f": "f0", "force": "f0", "equilibrium": "equilibrium0"}
 
 
 def _read_csv(path: Path, src: str, raw: bool = False):
@@ -406,21 +419,27 @@ def _read_csv(path: Path, src: str, raw: bool = False):
     if decimal_comma:
         lines = [lines[0]] + [r.replace(",", ".") for r in lines[1:]]
     header = [h.strip() for h in next(csv.reader([lines[0]], delimiter=delim))]
-    expected = ("t, x0.. (one per DOF; or v0.. or a0.. alone), optional v0.., a0.., f0.., base_acc "
-                "(one DOF: x, v, a, f or force also read as x0, v0, a0, f0)")
-    if not raw:  # the names a one-DOF lab file uses (and the NPZ keys): x, v, a, force
-        header = [_CSV_ALIASES.get(h, h) for h in header]
+    if _numbers(header):
+        raise GMRInputError(f"{src}: the first line holds numbers ({lines[0][:60].strip()}), not column names: a "
+                            f"header row is needed, e.g. t,x,v,a,base_acc (see `gmr fit --help`), as the first line")
+    expected = ("t, x0.. (one per DOF; or v0.. or a0.. alone), optional v0.., a0.., f0.., base_acc, equilibrium0.. "
+                "(one DOF: x, v, a, f or force, equilibrium also read as x0, v0, a0, f0, equilibrium0)")
+    t_scale = 1.0
+    if not raw:  # the names a one-DOF lab file uses (and the NPZ keys), in any case, with a unit: "v [m/s]"
+        header, t_scale = _standard_names(header, src)
 
     def known(h):
         if h in ("t", "base_acc"):
             return True
-        return any(h.startswith(p) and h[len(p):].isdigit() for p in ("x", "v", "a", "f"))
+        return any(h.startswith(p) and h[len(p):].isdigit() for p in ("x", "v", "a", "f", "equilibrium"))
 
     unknown = [] if raw else [h for h in header if not known(h)]
     if unknown or (not raw and ("t" not in header or not {"x0", "v0", "a0"} & set(header))):
         what = f"unknown column(s) {unknown}" if unknown else "missing column 't' or 'x0'"
-        raise GMRInputError(f"{src}: {what}; found columns {header}, expected {expected} "
-                            f"(the first line must be this header)")
+        raise GMRInputError(f"{src}: {what}; found columns {header}, expected {expected} (the first line must be "
+                            f"this header; a unit in brackets is allowed, 'v [m/s]'). To read a lab file's own "
+                            f"names, map them: --columns t=Time,x=disp (CLI) or columns={{'t': 'Time', 'x': "
+                            f"'disp'}} (API); the columns not mapped are then ignored")
     dup = sorted({h for h in header if header.count(h) > 1})
     if dup:
         raise GMRInputError(f"{src}: column(s) {dup} appear more than once in the header (x, v, a, f, force are read "
@@ -461,8 +480,52 @@ def _read_csv(path: Path, src: str, raw: bool = False):
                                 f"{', '.join(pre + str(i) for i in missing)} missing")
         return np.stack([col[f"{pre}{i}"] for i in idx], axis=1)
 
-    return Recording(t=col["t"], x=group("x"), v=group("v"), a=group("a"),
-                     base_acc=col.get("base_acc"), force=group("f"), name=path.stem)
+    eq = group("equilibrium")
+    if eq is not None:  # a column that repeats one value per DOF (a CSV has no scalars)
+        if not np.all(np.isfinite(eq)) or np.ptp(eq, axis=0).max() > 1e-9 * max(np.abs(eq).max(), 1e-300):
+            raise GMRInputError(f"{src}: the 'equilibrium' column varies over the record; it is one number per DOF "
+                                f"(where the record vibrated about), repeated on every row")
+        eq = eq[0]
+    return Recording(t=col["t"] * t_scale, x=group("x"), v=group("v"), a=group("a"),
+                     base_acc=col.get("base_acc"), force=group("f"), name=path.stem, equilibrium=eq)
+
+
+#: a time column's unit in a CSV header ("t [ms]"): its factor to seconds
+TIME_UNITS = {"s": 1.0, "sec": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6, "min": 60.0}
+_UNIT = re.compile(r"^(.*?)\s*[\[(]\s*([^\])]*?)\s*[\])]$")
+
+
+def _numbers(cells) -> bool:
+    """Whether every cell of a header row parses as a number (a file without a header)."""
+    try:
+        [float(c.replace(",", ".")) for c in cells]
+    except ValueError:
+        return False
+    return bool(cells)
+
+
+def _standard_names(header, src):
+    """A CSV header's names as the contract's (`x0`, `v0`, ...): a unit in brackets or parentheses taken off
+    ("v [m/s]", "t (ms)"), the case ignored where the lower-case name is the contract's, `time` read as `t`, and the
+    one-DOF names (`x`, `v`, `a`, `f`, `force`, `equilibrium`) as `x0`, ... The time column's unit, where given,
+    scales it to seconds (`TIME_UNITS`); the others' units are the model's (not converted). Returns the names and
+    the factor of t."""
+    out, t_scale = [], 1.0
+    for h in header:
+        m = _UNIT.match(h)
+        name, unit = (m.group(1).strip(), m.group(2).strip()) if m else (h, None)
+        low = name.lower()
+        low = "t" if low == "time" else low
+        if low == "t" or low == "base_acc" or _CSV_ALIASES.get(low) or re.fullmatch(r"(x|v|a|f|equilibrium)\d+", low):
+            name = low
+        name = _CSV_ALIASES.get(name, name)
+        if name == "t" and unit is not None:
+            if unit.lower() not in {k.lower() for k in TIME_UNITS}:
+                raise GMRInputError(f"{src}: the time column's unit '{unit}' is not one of {sorted(TIME_UNITS)}; "
+                                    f"give t in seconds (or one of those units in the header, 't [ms]')")
+            t_scale = next(v for k, v in TIME_UNITS.items() if k.lower() == unit.lower())
+        out.append(name)
+    return out, t_scale
 
 
 def _read_npz(path: Path, src: str, raw: bool = False):
