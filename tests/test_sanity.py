@@ -454,3 +454,17 @@ def test_14_damping_law_the_records_do_not_decide():
     # a position-dependent difference counts too: 0.1 x^2 v beside 0.188 v parts by 25 % where x^2 > 0.47
     msgs = _sanity.check_damping_choice(0, b, c, [0.0] * 4, [0.0, 0.0, 0.1], [0], 3.0, 0.2, 3.0, -1.0, 1.0)
     assert len(msgs) == 1 and "sgn(v)" in msgs[0]
+
+
+def test_6b_one_file_in_other_units_is_reported(nes):
+    """Rule 6b (`check_scales`): the NES's records vibrate within 1.12 x of each other (the built-in systems within
+    10.2 x, the torque-free Kresling's stiff deployed well); one record's x in mm (1000 x) is reported with the
+    likely cause, the clean set is not."""
+    _, recs = nes
+    names = [r.name for r in recs]
+    xs = [r.x[:, 0] for r in recs]
+    assert _sanity.check_scales(0, names, xs, [0, 1, 2]) == []
+    msgs = _sanity.check_scales(0, names, [xs[0], xs[1] * 1e3, xs[2]], [0, 1, 2])
+    assert len(msgs) == 1 and "nes_S2 vibrates" in msgs[0] and "about 1000: one file in mm" in msgs[0], msgs
+    # two records of one well: the well's largest counts, a quiet repeat of it is no mismatch
+    assert _sanity.check_scales(0, names[:2], [xs[0], xs[0] * 1e-3], [0, 0]) == []

@@ -1066,6 +1066,7 @@ def reconstruct(
         local_k = coef[:, k1]
         swing, swung = _sanity.check_swings(i, names, xcol, labels, eq, local_k)
         warnings += swing + _sanity.check_amplitude(i, names, xcol, labels, eq, skip=swung)
+        warnings += _sanity.check_scales(i, names, xcol, labels)
         well_names = [", ".join(names[k] for k in grp) for grp in groups]
         exempt = _under_top_order(coef, library) if screen_sigma is not None else None
         if exempt is not None:  # orders `_extend_restoring` added are kept on purpose (`FILL_CURVATURE`: whatever t)

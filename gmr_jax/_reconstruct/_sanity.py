@@ -371,6 +371,34 @@ def check_amplitude(dof: int, names, xs, labels, equilibria, skip=()) -> list[st
     return out
 
 
+#: the vibration amplitudes of one DOF's wells differ by more than this factor: units? (`check_scales`)
+SCALE_RATIO = 100.0
+
+
+def check_scales(dof: int, names, xs, labels) -> list[str]:
+    """Rule 6b: one DOF's wells vibrate at amplitudes within a factor of a few of each other under one kind of
+    excitation (the built-in systems: within 10, the Kresling cells' stiff deployed wells included); a factor
+    above `SCALE_RATIO` (100) is more likely a file whose x is in other units (mm where the others are in m: 1000),
+    which the fit would take as a well 1000 x as far and as soft (hand-made Duffing, one file in mm: 415 % restoring
+    error, warned only as a poor fit)."""
+    amps = {}
+    for name, x, lab in zip(names, xs, labels):
+        a = vibration_amplitude(x)
+        if a > 0 and (lab not in amps or a > amps[lab][0]):
+            amps[lab] = (a, name)
+    if len(amps) < 2:
+        return []
+    (lo, lo_name), (hi, hi_name) = min(amps.values()), max(amps.values())
+    ratio = hi / lo
+    if ratio <= SCALE_RATIO:
+        return []
+    power = next((p for p in (1e3, 1e6) if abs(np.log10(ratio / p)) < np.log10(2.0)), None)
+    hint = f" (about {power:g}: one file in mm or um where the other is in m?)" if power else ""
+    return [f"DOF {dof}: {hi_name} vibrates {_g(ratio)} times as far as {lo_name}{hint}; the wells of one structure "
+            f"under one kind of excitation differ by a few times at most: check that every file's x is in the same "
+            f"units (a file in mm: its x times 1e-3, before the fit)"]
+
+
 # --- warnings on the fits and the model -----------------------------------------------------
 
 
