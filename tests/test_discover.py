@@ -255,3 +255,28 @@ def test_a_holdout_that_crosses_wells_is_judged_by_short_runs():
     assert a["horizon_nrmse"] < 0.5 * b["horizon_nrmse"] and a["horizon_nrmse"] < 0.05, (b, a)
     assert "crosses between wells" in rep.summary()
     assert all(np.ptp(r.x) < 0.3 for r in est)  # the estimation records stay in their wells
+
+
+def test_summary_says_when_no_finding_but_a_term_moved_far():
+    """With no finding, a re-calibration beyond `LARGE_CORRECTION` of the model's coefficient (outside its
+    interval) is said in the headline instead of "Nothing missing" (hand-made Duffing with its 0.1 v|v| left out,
+    20 dB: no finding, the viscous term +26 %, quadratic drag only "not reported"); a small one is not."""
+    from types import SimpleNamespace
+
+    from gmr_jax._discover._report import summary
+
+    def report(correction):
+        return SimpleNamespace(
+            before={"kind": "output", "on": "holdout", "nrmse": 0.28}, after={"kind": "output", "nrmse": 0.14},
+            findings=[], given=SimpleNamespace(topology=SimpleNamespace(name="independent"), n_dof=1),
+            corrections=[{"dof": 0, "physics": "viscous_damping", "family": "velocity_damping", "order": 1,
+                          "model_value": 0.1, "coefficient": correction,
+                          "ci95": [0.9 * correction, 1.1 * correction]}],
+            settings={}, warnings=[], identifiability=[],
+            selection=[{"dof": 0, "rejected": [{"physics": "quadratic_drag", "term": "sgn(v)|v|^2",
+                                                "reason": "failed the rule"}]}])
+
+    moved = summary(report(0.0264))
+    assert "Nothing missing" not in moved and "viscous_damping (velocity_damping 1) by +26.4 %" in moved, moved
+    assert "not reported below: quadratic_drag" in moved and "not a confirmation" in moved
+    assert summary(report(0.002)).startswith("Nothing missing")

@@ -219,7 +219,8 @@ def test_cli_refine(chain_data, tmp_path, capsys):
     refined = g.load_model(out)
     np.testing.assert_allclose(np.asarray(refined.stiffness), np.asarray(truth.stiffness), rtol=0.02, atol=1e-9)
     np.testing.assert_array_equal(np.asarray(refined.position_damping)[:, 0], np.asarray(start.position_damping)[:, 0])
-    assert "holdout NRMSE" in printed
+    assert "holdout NRMSE over 0.5 s windows" in printed and "free run over the whole record NRMSE" in printed
+    assert "lacks something no free coefficient covers" not in printed, printed  # an exact structure: no warning
     # user errors: one line, exit status 2
     assert main(["refine", str(tmp_path / "start.json"), rec_paths[0], "--out", str(out), "--free", "springs"]) == 2
     assert main(["refine", str(tmp_path / "start.json"), rec_paths[0], "--out", str(out), "--window", "99"]) == 2
@@ -307,3 +308,35 @@ def test_refining_on_single_well_records_can_spoil_the_global_law(tmp_path, caps
     assert main(["refine", str(tmp_path / "m.json"), *recs, "--holdout", hold, "--out", str(tmp_path / "r.json"),
                  "--no-progress"]) == 0
     assert "gmr refine: warning: the refined model is worse" in capsys.readouterr().out
+
+
+@pytest.mark.slow  # a refine and two free runs through the CLI (~45 s)
+def test_cli_refine_checks_the_refined_model_over_longer_horizons(tmp_path, capsys):
+    """The multiple-shooting windows restart from the recorded state: a model with no damping at all (nothing free
+    can stand in for it) fits them well and still leaves the record within periods. The CLI runs the refined model
+    free over the holdout (it stays in its wells: the whole record) and says so; the report file keeps it."""
+    import json
+
+    from gmr_jax._cli._main import main
+
+    system = g.systems.bistable_joint("position_independent")
+    recs = g.systems.make_recordings(system, np.deg2rad(1.0), snr_db=60.0, seed=0, duration=20.0)
+    from gmr_jax._model._io import model_to_dict
+
+    truth = model_to_dict(system.truth)
+    g.save_model(g.from_terms(truth["masses"], [t for t in truth["terms"] if t["physics"] == "stiffness"]),
+                 tmp_path / "undamped.json")
+    paths = []
+    for r in recs:
+        g.save_recording(r, tmp_path / f"{r.name}.npz")
+        paths.append(str(tmp_path / f"{r.name}.npz"))
+    out = tmp_path / "refined.json"
+    code = main(["refine", str(tmp_path / "undamped.json"), paths[0], "--holdout", paths[1], "--out", str(out),
+                 "--free", "stiffness", "--window", "0.5", "--stride", "4"])
+    printed = capsys.readouterr().out
+    assert code == 0, printed
+    assert "free run over the whole record NRMSE" in printed and "over the whole record (it stays in its wells)" in printed
+    assert "lacks something no free coefficient covers" in printed, printed
+    report = json.loads(out.read_text())["refinement"]
+    assert report["free_run"][0]["recording"] == recs[1].name
+    assert any("lacks something" in w for w in report["warnings"])

@@ -9,6 +9,7 @@ and `simulate.md`; prints the NRMSE per DOF. A run that diverges or fails is rep
 
 import json
 import sys
+import warnings
 
 import numpy as np
 
@@ -55,11 +56,16 @@ def run(args) -> int:
     model = gmr.load_model(args.model)
     rec = load_recordings([args.recording], args.columns)[0][0]
     stage(f"simulating {rec.n_samples} samples under the recorded input (compiles first)")
-    sol = gmr.free_run(model, rec, throw=False)
+    with warnings.catch_warnings(record=True) as caught:  # printed as `warning:` lines, kept in the report
+        warnings.simplefilter("always", gmr.GMRDataWarning)
+        sol = gmr.free_run(model, rec, throw=False)
+    said = [str(w.message) for w in caught if issubclass(w.category, gmr.GMRDataWarning)]
+    for w in said:
+        print(f"gmr simulate: warning: {w}", file=sys.stderr)
     fr = sol.value
     ok = not sol.stats["message"]
     doc = {"model": args.model, "recording": args.recording, "result": sol.stats["result"],
-           "start_sample": fr.start, "notes": list(fr.notes)}
+           "start_sample": fr.start, "notes": list(fr.notes), "warnings": said}
     if not ok:
         doc["message"] = sol.stats["message"]
         (out / "simulate.json").write_text(json.dumps(doc, indent=1) + "\n")
@@ -78,10 +84,15 @@ def run(args) -> int:
     lines = _horizon_lines(fr)
     stage(f"writing {out}")
     free_run_figure(fr, out / "simulate.png", x_unit=args.x_unit,
-                    title=f"{args.model} on {rec.name}: free run under the recorded input")
+                    title=f"{args.model} on {rec.name}: " + ("free run under the recorded input"
+                                                             if rec.base_acc is not None or rec.force is not None
+                                                             else "free decay (no input column)"))
     (out / "simulate.json").write_text(json.dumps(doc, indent=1) + "\n")
     md = [f"# gmr simulate: {args.model} on {args.recording}", "",
-          "Free run under the recorded input from the recorded state; NRMSE = ||x_model - x|| / ||x - mean(x)||.", "",
+          ("Free run under the recorded input" if rec.base_acc is not None or rec.force is not None
+           else "Free decay (the recording has no input column)")
+          + " from the recorded state; NRMSE = ||x_model - x|| / ||x - mean(x)||.", "",
+          *[f"**Warning.** {w}" for w in said], *([""] if said else []),
           "| DOF | NRMSE |", "|---|---|"] + [f"| {i} | {100 * e:.4g} % |" for i, e in enumerate(fr.nrmse)]
     md += [f"| all | {100 * total:.4g} % |", "", *[f"- {line.strip()}" for line in lines],
            *[f"- {n}" for n in fr.notes], "",

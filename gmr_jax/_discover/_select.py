@@ -214,7 +214,7 @@ def select_terms(X_base: np.ndarray, X_cand: np.ndarray, y: np.ndarray,
         rss_j = float(rss(G, b, yy, jnp.asarray(masks[k])))
         tau_j = integrated_time(resid_of(masks[k]))
         pval = _f_pvalue(rss_S, rss_j, n / tau_j, masks[k].sum())
-        gain = 1.0 - cvs[k] / cv_S
+        gain = 1.0 - cvs[k] / cv_S if cv_S > 0 else 0.0  # an exact fit (noise-free data): nothing left to gain
         ok = gain >= rule.min_cv_gain and pval < alpha_b
         steps.append({"candidate": j - p0, "cv_gain": float(gain), "p_value": pval,
                       "tau": tau_j, "accepted": bool(ok)})

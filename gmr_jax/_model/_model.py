@@ -200,7 +200,10 @@ def check_terms(terms, n_dof: int, source: str = "from_terms", duplicates: str =
             raise GMRInputError(f"{where} lacks {', '.join(repr(k) for k in missing)}; {_TERM_FIX}")
         phys = t["physics"]
         if not isinstance(phys, str) or phys not in KNOWN_PHYSICS:
-            raise GMRInputError(f"{where}: unknown physics {describe(phys)}; known: {', '.join(KNOWN_PHYSICS)}")
+            hint = _REPORT_NAMES.get(phys) if isinstance(phys, str) else None
+            raise GMRInputError(f"{where}: unknown physics {describe(phys)}; known: {', '.join(KNOWN_PHYSICS)}"
+                                + (f" ('{phys}' is a discovery report's name: in a model write physics "
+                                   f"'{hint[0]}', order {hint[1]})" if hint else ""))
         dof = as_whole_number(t["dof"], f"{where}: 'dof'", accept_float=True,
                               fix=f"DOFs are numbered 0..{n_dof - 1}")
         if not 0 <= dof < n_dof:
@@ -247,6 +250,15 @@ def coefficients(model: GlobalModel) -> Float[Array, "*batch dof p"]:
 _COV_FIX = ('the covariance is a list of {"dof": i, "terms": [[physics, order], ...], "matrix": [[...], ...]} '
             'entries, one per DOF at most, the matrix square, symmetric, finite, with a non-negative diagonal, '
             'one row per listed term; omit the key when the covariance is unknown')
+
+
+#: the discovery report's physics names (contracts) as model terms (physics, order)
+_REPORT_NAMES = {"preload": ("stiffness", 0), "linear_stiffness": ("stiffness", 1),
+                 "quadratic_stiffness": ("stiffness", 2), "cubic_stiffness": ("stiffness", 3),
+                 "quartic_stiffness": ("stiffness", 4), "quintic_stiffness": ("stiffness", 5),
+                 "coulomb_friction": ("velocity_damping", 0), "viscous_damping": ("velocity_damping", 1),
+                 "quadratic_drag": ("velocity_damping", 2), "cubic_damping": ("velocity_damping", 3),
+                 "position_dependent_damping": ("position_damping", "the finding's 'order'")}
 
 
 def check_covariance(entries, n_dof: int, source: str = "from_terms") -> list[dict]:

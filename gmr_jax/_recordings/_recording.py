@@ -258,8 +258,8 @@ def validate(rec: Recording, src: str = "recording", min_samples: int = MIN_SAMP
     n = t.shape[0]
     if n < min_samples:
         raise GMRInputError(
-            f"{src}: only {n} samples; at least {min_samples} are needed to fit a local model "
-            f"(record longer or sample faster)"
+            f"{src}: only {n} samples; at least {min_samples} are needed to fit a local model or compare a run "
+            f"with the record (record longer or sample faster)"
         )
     x = _as2d("x", rec.x, n, src)
     out = {"t": t, "x": x}

@@ -9,13 +9,14 @@ simulation `discover` reports as output error. An x integrated from v or a is co
 same drift removal (`_offset.comparable`), its unobservable equilibrium placed by the model.
 """
 
+import warnings
 from dataclasses import dataclass
 
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Float, Int
 
-from .._errors import GMRInputError
+from .._errors import GMRDataWarning, GMRInputError
 from .._model._model import AbstractMechanicalModel
 from .._recordings._recording import Recording, load_recording, validate
 from .._solution import RESULTS, Solution, as_result, code_name, message, raise_if_failed
@@ -89,7 +90,13 @@ def free_run(model: AbstractMechanicalModel, recording, *, columns: dict | None 
     if rec.n_dof != model.n_dof:
         raise GMRInputError(f"free_run: {rec.name} has {rec.n_dof} DOF(s), the model {model.n_dof}")
     rec = rec.complete(model.topology.name)
-    notes = ["input low-passed at 3x its band edge, cubic-spline interpolated"]
+    if rec.base_acc is None and rec.force is None:  # the contract's free decay, or an input column left out
+        notes = ["no input column (base_acc or force): simulated as a free decay from the first state"]
+        warnings.warn(f"{rec.name}: has no input column (base_acc or force), so the model is run as a free decay; if "
+                      f"the structure was driven, add its input column (or map it: --columns base_acc=NAME)",
+                      GMRDataWarning, stacklevel=2)
+    else:
+        notes = ["input low-passed at 3x its band edge, cubic-spline interpolated"]
     if not rec.equilibrium_observed:
         rec = place(model, [rec])[0][0]
         notes.append("x integrated from the recording's " + rec.integration["from"] +
