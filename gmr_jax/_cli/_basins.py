@@ -104,7 +104,7 @@ def run(args) -> int:
     n_cpu = gmr.use_cpu_cores(args.cpu_devices, strict=False)  # before any JAX computation
     import jax
 
-    from ..plots import basin_figure, config_label
+    from ..plots._basins import basin_figure, config_label, well_label
 
     f, A = grid(args.f, "f"), grid(args.A, "A")
     stage("loading the model, finding its wells")
@@ -136,10 +136,10 @@ def run(args) -> int:
     cat = {key: np.asarray(getattr(bm, key)) for key in ("wells", "config", "result", "x_final", "v_final", "steps")}
     np.savez(out / "basins.npz", f=f, A=A, **cat)
     basin_figure(f, A, cat["config"], model.n_dof, out / "basins.png",
-                 title=f"{Path(args.model).stem}: final configuration, {args.load} half-sine (Eq. 25)")
+                 title=f"{Path(args.model).stem}: final configuration, {args.load} half-sine (Eq. 25)", wells=wells)
     vals, counts = np.unique(cat["config"], return_counts=True)
     for v, c in zip(vals, counts):
-        print(f"  {config_label(int(v), model.n_dof):22s} {c:7d} points")
+        print(f"  {well_label(int(v), model.n_dof, wells):22s} {c:7d} points")
     bad = cat["config"] < 0
     if np.any(bad):
         from .._solution import code_name

@@ -35,7 +35,7 @@ from .._simulate._inputs import sampled_spline
 from .._simulate._integrate import Integrator
 from .._simulate._simulate import simulate
 from ._catalogue import PLAIN, Term, default_catalogue, model_terms
-from ._equation import dof_rows
+from ._equation import dof_rows, sign_certain
 from ._identify import (MASS_RANGE, VIF_MAX, DofIdentifiability, ambiguous, closest, collinear_entry, determined,
                         explained, homogeneous, mass_believable, screen, separability_entry, vif)
 from ._locate import locate, where_sentence
@@ -90,6 +90,10 @@ class DiscoveryReport:
         from ._report import summary
 
         return summary(self)
+
+
+#: `sign_certain` runs (a module switch, for the studies' before/after and the tests' teeth)
+SIGN_CERTAIN = True
 
 
 def _pct(a):
@@ -360,6 +364,8 @@ def discover(
         terms = base + cands
         rows = [dof_rows(r, model, i, terms, form=form, support=support, decimate=decimate,
                          mass_column=refit_masses) for r in recs]
+        if SIGN_CERTAIN:  # strong form: the samples where sgn(v) is uncertain left out (`_equation.sign_certain`)
+            rows = [sign_certain(rw, r, i) for rw, r in zip(rows, recs)]
         y = np.concatenate([r.y for r in rows])
         X = np.concatenate([r.columns for r in rows])
         Xb, Xc = X[:, : len(base)], X[:, len(base):]

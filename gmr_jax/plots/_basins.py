@@ -27,12 +27,24 @@ def config_colour(config: int, n_dof: int) -> tuple:
     return matplotlib.colormaps["nipy_spectral"](0.05 + 0.9 * config / (n_all - 1))
 
 
-def basin_figure(f, A, config, n_dof: int, path=None, title: str = "", *, ax=None) -> Figure:
+def well_label(config: int, n_dof: int, wells=None) -> str:
+    """`config_label`, with the well's position for one DOF where `wells` ((dof, k) stable equilibria) is given:
+    "1 (x = 1.131)"."""
+    label = config_label(config, n_dof)
+    if wells is None or n_dof != 1 or config < 0:
+        return label
+    w = np.asarray(wells, float).reshape(1, -1)[0]
+    w = w[np.isfinite(w)]
+    return f"{label} (x = {w[config]:.4g})" if config < w.size else label
+
+
+def basin_figure(f, A, config, n_dof: int, path=None, title: str = "", *, ax=None, wells=None) -> Figure:
     """The final configuration over the (f, A) grid, one colour per configuration (legend in
     the 0-1-1-0-0 style, cell 0 first; dark grey: not settled or failed). A configuration has
     the same colour in every figure of the structure (`config_colour`), so maps side by side
     (model vs truth) compare by eye. Draws into `ax` when given (a notebook's own layout), else
-    a new figure. Saved to `path` when given (and as PDF beside it); returns the `Figure`."""
+    a new figure. Saved to `path` when given (and as PDF beside it); returns the `Figure`. `wells`: the stable
+    equilibria per DOF ((dof, k), NaN-padded), for a one-DOF legend that says where each well is."""
     config = np.asarray(config)
     values = sorted(set(config.ravel().tolist()))
     index = {v: k for k, v in enumerate(values)}
@@ -47,7 +59,7 @@ def basin_figure(f, A, config, n_dof: int, path=None, title: str = "", *, ax=Non
         fig = ax.figure
     ax.pcolormesh(np.asarray(f), np.asarray(A), img, cmap=cmap, norm=norm, shading="auto")
     handles = [Rectangle((0, 0), 1, 1, color=colors[k]) for k in range(len(values))]
-    ax.legend(handles, [config_label(v, n_dof) for v in values], title="final configuration",
+    ax.legend(handles, [well_label(v, n_dof, wells) for v in values], title="final configuration",
               bbox_to_anchor=(1.02, 1), loc="upper left", fontsize=7, ncol=1 if len(values) <= 16 else 2)
     ax.set_xlabel("actuation frequency f [Hz]")
     ax.set_ylabel("actuation amplitude A")
