@@ -501,7 +501,7 @@ def test_a_velocity_term_is_kept_on_its_robust_covariance(monkeypatch):
     dropped, and the viscous term is unbiased (bistable joint, 10 v^3, 5 degrees, 30 dB on v, seed 4's sweeps with
     fresh draws of v's noise); the laws that hold it are no longer alternatives (rule 14 read them as better by 1-40
     in the score)."""
-    import gmr_jax._reconstruct._velocity_noise as recon
+    import gmr_jax._reconstruct._reconstruct as recon
     from gmr_jax._coordination import _joint
 
     s = g.systems.bistable_joint("position_independent")
