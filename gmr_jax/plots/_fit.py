@@ -4,7 +4,9 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from .._model._predict import forces
+from .._recordings._integrate import remove_drift
 from .._reconstruct._reconstruct import regression_targets
+from .._reconstruct._slow import restore_slow
 
 #: one colour per recording (well), reused in every panel
 COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
@@ -74,18 +76,21 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
     - damping force F_d(x_i, v) at each recording's mean displacement x_i, over 1.5x the
       speeds it reached (recorded speed range shaded);
     - residual: measured force carried by the DOF (the regression target, Eq. 8) minus the
-      model's F(x, v), against time, with its NRMSE per recording.
+      model's F(x, v), against time, with its NRMSE per recording (an x integrated from v or a: above its drift
+      cut-off, the band the fit uses).
 
     `recordings`: the `Recording`s the model was fitted on (v and a are estimated where
     missing, as `reconstruct` does). `band`: "auto" (default) draws the model's 95 % bands of
     F_r and F_d (`force_band`) when it carries a covariance (`reconstruct` sets one); None draws none;
     or a callable `x (n, dof) -> (lower, upper)`, each (n, dof), for F_r (then no band on F_d). Saved (PNG, or PDF by suffix) to
     `path` when given; returns the matplotlib `Figure`."""
+    masses = np.asarray(model.masses, float)
+    # an x integrated from v or a: the slow shift its drift removal took, restored as `reconstruct` restores it
     recs = [r.complete(model.topology) for r in recordings]
+    recs = [restore_slow(r, regression_targets(r, masses, model.topology)) for r in recs]
     auto = isinstance(band, str) and band == "auto"
     band = _model_band(model) if auto else band
     damping_band = _damping_band(model) if auto else None
-    masses = np.asarray(model.masses, float)
     d = model.n_dof
     height = 3.0 * d + 0.7
     fig = Figure(figsize=(13.5, height))  # fixed margins: a constrained layout doubles the time to save
@@ -140,6 +145,12 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
             y = regression_targets(r, masses, model.topology)[:, i]
             fr_, fd_ = forces(model, r.x, r.v, parts=True)
             res = y - (fr_ + fd_)[:, i]
+            # an x integrated from v or a lost its content below the drift cut-off, and the fit leaves that band out
+            # (`_reconstruct/_slow.band_rows`): so does the residual shown (else it wanders with the slow shift)
+            cuts = (r.integration or {}).get("f_highpass_hz") if "x" in r.derived else None
+            cut = float(cuts[i]) if cuts is not None and len(cuts) > i and cuts[i] else None
+            if cut is not None:
+                res, y = (remove_drift(a, float(r.dt), cut, keep_mean=True) for a in (res, y))
             nrmse = float(np.sqrt(np.sum(res**2) / max(np.sum((y - y.mean()) ** 2), 1e-300)))
             # envelope (min and max per bin of ~20 samples, 400 bins at most): every excursion
             # shows, and the figure stays light (a 10^5-sample line makes PDFs slow and heavy)
@@ -147,7 +158,8 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
             edges = np.linspace(0, r.t.size, nb + 1).astype(int)
             lo_, hi_ = np.minimum.reduceat(res, edges[:-1]), np.maximum.reduceat(res, edges[:-1])
             ax_e.fill_between(r.t[edges[:-1]], lo_, hi_, color=col, alpha=0.5, lw=0, step="post",
-                              label=f"{r.name}: NRMSE {nrmse:.3g}")
+                              label=f"{r.name}: NRMSE {nrmse:.3g}" + (f" (above {cut:.2g} Hz, as fitted)"
+                                                                         if cut is not None else ""))
         _dress(ax_e, "time (s)", f"measured - model ({force_unit})",
                "force residual: target (Eq. 8) - model (envelope)")
     if title:
