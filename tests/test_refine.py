@@ -337,6 +337,9 @@ def test_cli_refine_checks_the_refined_model_over_longer_horizons(tmp_path, caps
     assert code == 0, printed
     assert "free run over the whole record NRMSE" in printed and "over the whole record (it stays in its wells)" in printed
     assert "lacks something no free coefficient covers" in printed, printed
-    report = json.loads(out.read_text())["refinement"]
+    saved = json.loads(out.read_text())
+    report = saved["refinement"]
     assert report["free_run"][0]["recording"] == recs[1].name
     assert any("lacks something" in w for w in report["warnings"])
+    assert any("lacks something" in w for w in saved["warnings"])  # top level: `gmr show` prints them
+    assert main(["show", str(out)]) == 0 and "lacks something" in capsys.readouterr().out

@@ -88,7 +88,8 @@ def run(args) -> int:
         print(f"gmr refine: error: {RESULTS[sol.result]} [{code_name(sol.result)}]; the model was not written",
               flush=True)
         return 1
-    gmr.save_model(sol.value, args.out, method="refined", refinement=report)
+    gmr.save_model(sol.value, args.out, method="refined", refinement=report,
+                   warnings=list(report["warnings"]))  # `gmr show` prints them
     for line in sol.value.equations():
         print("  " + line)
     print(f"wrote {args.out}")
