@@ -104,7 +104,7 @@ def run(args) -> int:
     n_cpu = gmr.use_cpu_cores(args.cpu_devices, strict=False)  # before any JAX computation
     import jax
 
-    from ..plots._basins import basin_figure, config_label, well_label
+    from ..plots._basins import basin_figure, well_label
 
     f, A = grid(args.f, "f"), grid(args.A, "A")
     stage("loading the model, finding its wells")

@@ -200,7 +200,7 @@ def check_terms(terms, n_dof: int, source: str = "from_terms", duplicates: str =
             raise GMRInputError(f"{where} lacks {', '.join(repr(k) for k in missing)}; {_TERM_FIX}")
         phys = t["physics"]
         if not isinstance(phys, str) or phys not in KNOWN_PHYSICS:
-            hint = _REPORT_NAMES.get(phys) if isinstance(phys, str) else None
+            hint = _report_name(phys) if isinstance(phys, str) else None
             raise GMRInputError(f"{where}: unknown physics {describe(phys)}; known: {', '.join(KNOWN_PHYSICS)}"
                                 + (f" ('{phys}' is a discovery report's name: in a model write physics "
                                    f"'{hint[0]}', order {hint[1]})" if hint else ""))
@@ -252,13 +252,15 @@ _COV_FIX = ('the covariance is a list of {"dof": i, "terms": [[physics, order], 
             'one row per listed term; omit the key when the covariance is unknown')
 
 
-#: the discovery report's physics names (contracts) as model terms (physics, order)
-_REPORT_NAMES = {"preload": ("stiffness", 0), "linear_stiffness": ("stiffness", 1),
-                 "quadratic_stiffness": ("stiffness", 2), "cubic_stiffness": ("stiffness", 3),
-                 "quartic_stiffness": ("stiffness", 4), "quintic_stiffness": ("stiffness", 5),
-                 "coulomb_friction": ("velocity_damping", 0), "viscous_damping": ("velocity_damping", 1),
-                 "quadratic_drag": ("velocity_damping", 2), "cubic_damping": ("velocity_damping", 3),
-                 "position_dependent_damping": ("position_damping", "the finding's 'order'")}
+def _report_name(phys: str):
+    """The model term (physics, order) of a discovery report's physics name (the catalogue's vocabulary,
+    contracts), None if it is not one."""
+    from .._discover._catalogue import POSITION_DAMPING_NAME, STIFFNESS_NAMES, VELOCITY_NAMES
+
+    names = ({n: (STIFFNESS, k) for k, n in enumerate(STIFFNESS_NAMES)}
+             | {n: (VELOCITY_DAMPING, k) for k, n in enumerate(VELOCITY_NAMES)}
+             | {POSITION_DAMPING_NAME: (POSITION_DAMPING, "the finding's 'order'")})
+    return names.get(phys)
 
 
 def check_covariance(entries, n_dof: int, source: str = "from_terms") -> list[dict]:

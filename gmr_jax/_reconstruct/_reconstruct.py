@@ -1033,10 +1033,10 @@ def reconstruct(
         labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band, at_rest, damping_added, position_added = local[i]
         data_fits = fits  # the local fits from the data alone (reported; the resolution report reads them)
         borrowed, design_why = [], None
+        integrated = segs_all[i] is not None and INTEGRATED_CONDITIONS  # F, F', F'' only (`_slow.curvature_only`)
         if plan[i] is not None:
             fits, borrowed = _borrow(fits, plan[i], xs, vs, ys, w, library, x_noises[i], band)
-        if segs_all[i] is not None and INTEGRATED_CONDITIONS:  # x integrated: F, F', F'' (`_slow.curvature_only`)
-            fits = curvature_only(fits, library)
+        fits = curvature_only(fits, library) if integrated else fits
         say(f"{f'DOF {i} ({i + 1}/{d}): ' if d > 1 else ''}coordination ({coordination})")
         coord, route, why, paper_sound, confining, found = _coordinate_dof(
             fits, xs, vs, ys, w, library, coordination, float(masses[i]), i, odd_only=any(borrowed),
@@ -1046,9 +1046,7 @@ def reconstruct(
             # only this cell's data) would replace it: the cell goes on alone (torque-free Kresling,
             # 1 mm, seed 3, cell 4: an outward-turning nonic, then a joint law 86 % off)
             design_why = "the borrowed orders gave an inadmissible law: " + "; ".join(why[:1])
-            fits, borrowed = data_fits, []
-            if segs_all[i] is not None and INTEGRATED_CONDITIONS:
-                fits = curvature_only(fits, library)
+            fits, borrowed = (curvature_only(data_fits, library) if integrated else data_fits), []
             coord, route, why, paper_sound, confining, found = _coordinate_dof(
                 fits, xs, vs, ys, w, library, coordination, float(masses[i]), i, x_noise=x_noises[i],
                 rows=row_filters[i], band=band, segs=segs_all[i], gain=gains[i], v_noise=v_noises[i])

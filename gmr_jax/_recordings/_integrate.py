@@ -82,7 +82,7 @@ def detrend(y: np.ndarray, degree: int) -> np.ndarray:
 
 def integrate(s: np.ndarray, dt: float, f_hp: float, times: int = 1) -> np.ndarray:
     """The drift-free `times`-fold integral of s (N,) (module docstring): integrate `times`
-    times (trapezoid), remove the least-squares polynomial of degree `times` (the unknown initial
+    times (`SPLINE`), remove the least-squares polynomial of degree `times` (the unknown initial
     values and what a sensor's bias integrates to), then the content below `f_hp`."""
     from scipy.interpolate import CubicSpline
 

@@ -13,6 +13,16 @@ FIELDS = ("t", "x", "v", "a", "base_acc", "force", "masses", "equilibrium")
 _TOKEN = re.compile(r"\s*([*/])\s*")
 
 
+def repeated_value(val, field: str, what: str, src: str) -> np.ndarray:
+    """The one value per DOF that a column (N,) or columns (N, D) repeat on every row (`field`: equilibrium, masses;
+    a CSV has no scalars), refused where it varies (`what` names the column in the message)."""
+    arr = np.asarray(val, float).reshape(np.shape(val)[0], -1)
+    if not np.all(np.isfinite(arr)) or np.ptp(arr, axis=0).max() > 1e-9 * max(np.abs(arr).max(), 1e-300):
+        raise GMRInputError(f"{src}: {what} varies over the record; '{field}' is one number per DOF (a column that "
+                            f"repeats it, or a number: --columns {field}=0.012)")
+    return arr[0]
+
+
 def squeeze(v) -> np.ndarray:
     """A stored value as a signal: a 1x1 matrix (a gain) is a number, a column or row vector (N,)."""
     v = np.asarray(v, float)
@@ -132,11 +142,7 @@ def map_columns(variables: dict, columns: dict | None, src: str) -> dict:
     for field in ("equilibrium", "masses"):  # a column that repeats one value per DOF (a CSV has no scalars)
         val = out.get(field)
         if val is not None and np.ndim(val) >= 1 and n > 1 and np.shape(val)[0] == n:
-            arr = np.asarray(val, float).reshape(n, -1)
-            if not np.all(np.isfinite(arr)) or np.ptp(arr, axis=0).max() > 1e-9 * max(np.abs(arr).max(), 1e-300):
-                raise GMRInputError(f"{src}: the column mapped to '{field}' varies over the record; '{field}' is one "
-                                    f"number per DOF (a column that repeats it, or a number: --columns {field}=0.012)")
-            out[field] = arr[0]
+            out[field] = repeated_value(val, field, f"the column mapped to '{field}'", src)
     for field, val in out.items():  # a scalar scale alone (e.g. force=gtau) is a mistake, not a signal
         if field not in ("masses", "equilibrium") and np.ndim(val) == 0:
             raise GMRInputError(f"{src}: column mapping gives a single number for '{field}', not {n} samples")

@@ -14,6 +14,7 @@ from .._errors import GMRDataWarning, GMRInputError, describe, is_tracer
 from .._topology import as_topology
 from ._derivatives import auto_window, differentiate
 from ._integrate import integrated_signals
+from ._mapping import repeated_value
 
 MIN_SAMPLES = 64
 
@@ -291,21 +292,14 @@ def validate(rec: Recording, src: str = "recording", min_samples: int = MIN_SAMP
                 f"{src}: '{key}' has {int(bad.sum())} NaN/inf value(s), first at sample {int(idx[0])}; "
                 f"remove or interpolate them before fitting"
             )
-    for k in range(x.shape[1]):
-        if x.shape[0] and np.all(x[:, k] == x[0, k]):  # (no max - min: it overflows near 1e308)
-            raise GMRInputError(
-                f"{src}: x of column {k} is constant ({x[0, k]:g} throughout): nothing to fit; "
-                f"check that sensor's column or drop that DOF"
-            )
-    for key in ("v", "a"):  # a dead channel: a constant that the fit would take as a measured signal
+    for key in ("x", "v", "a"):  # a constant column: nothing to fit (x), a dead channel (v, a)
         val = out.get(key)
         for k in range(0 if val is None else val.shape[1]):
-            if val.shape[0] and np.all(val[:, k] == val[0, k]):
-                raise GMRInputError(
-                    f"{src}: {key} of column {k} is constant ({val[0, k]:g} throughout): a dead or disconnected "
-                    f"sensor? check that column" + ("" if "x" in rec.derived else
-                                                    f", or leave '{key}' out of the file (it is then estimated from x)")
-                )
+            if val.shape[0] and np.all(val[:, k] == val[0, k]):  # (no max - min: it overflows near 1e308)
+                why = ("nothing to fit; check that sensor's column or drop that DOF" if key == "x" else
+                       "a dead or disconnected sensor? check that column" + ("" if "x" in rec.derived else
+                       f", or leave '{key}' out of the file (it is then estimated from x)"))
+                raise GMRInputError(f"{src}: {key} of column {k} is constant ({val[0, k]:g} throughout): {why}")
     dt = np.diff(t)
     if np.any(dt <= 0):
         i = int(np.argmax(dt <= 0))
@@ -481,11 +475,8 @@ def _read_csv(path: Path, src: str, raw: bool = False):
         return np.stack([col[f"{pre}{i}"] for i in idx], axis=1)
 
     eq = group("equilibrium")
-    if eq is not None:  # a column that repeats one value per DOF (a CSV has no scalars)
-        if not np.all(np.isfinite(eq)) or np.ptp(eq, axis=0).max() > 1e-9 * max(np.abs(eq).max(), 1e-300):
-            raise GMRInputError(f"{src}: the 'equilibrium' column varies over the record; it is one number per DOF "
-                                f"(where the record vibrated about), repeated on every row")
-        eq = eq[0]
+    if eq is not None:
+        eq = repeated_value(eq, "equilibrium", "the 'equilibrium' column", src)
     return Recording(t=col["t"] * t_scale, x=group("x"), v=group("v"), a=group("a"),
                      base_acc=col.get("base_acc"), force=group("f"), name=path.stem, equilibrium=eq)
 
@@ -520,10 +511,10 @@ def _standard_names(header, src):
             name = low
         name = _CSV_ALIASES.get(name, name)
         if name == "t" and unit is not None:
-            if unit.lower() not in {k.lower() for k in TIME_UNITS}:
+            t_scale = {k.lower(): f for k, f in TIME_UNITS.items()}.get(unit.lower())
+            if t_scale is None:
                 raise GMRInputError(f"{src}: the time column's unit '{unit}' is not one of {sorted(TIME_UNITS)}; "
                                     f"give t in seconds (or one of those units in the header, 't [ms]')")
-            t_scale = next(v for k, v in TIME_UNITS.items() if k.lower() == unit.lower())
         out.append(name)
     return out, t_scale
 

@@ -153,8 +153,7 @@ def band_coverage(model, truth, dof: int, x_range, v_range=None, *, part: str = 
     x = jnp.zeros((xs.size, d)).at[:, dof].set(jnp.asarray(xs))
     v = jnp.zeros((vs.size, d)).at[:, dof].set(jnp.asarray(vs))
     band = jax.vmap(lambda p, q: force_band(model, p, q, part=part, level=level))(x, v)
-    force = truth.restoring if part == "restoring" else truth.damping
-    f = np.asarray(jax.vmap(force)(x) if part == "restoring" else jax.vmap(force)(x, v))[:, dof]
+    f = np.asarray(jax.vmap(truth.restoring)(x) if part == "restoring" else jax.vmap(truth.damping)(x, v))[:, dof]
     low, up, mean = (np.asarray(a)[:, dof] for a in (band.lower, band.upper, band.mean))
     scale = float(np.max(np.abs(f)))
     return BandCoverage(float(np.mean((f >= low) & (f <= up))), float(np.median(up - low)) / scale,

@@ -4,9 +4,9 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from .._model._predict import forces
-from .._recordings._integrate import remove_drift
 from .._reconstruct._reconstruct import regression_targets
 from .._reconstruct._slow import restore_slow
+from .._recordings._integrate import remove_drift
 
 #: one colour per recording (well), reused in every panel
 COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
@@ -87,7 +87,8 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
     masses = np.asarray(model.masses, float)
     # an x integrated from v or a: the slow shift its drift removal took, restored as `reconstruct` restores it
     recs = [r.complete(model.topology) for r in recordings]
-    recs = [restore_slow(r, regression_targets(r, masses, model.topology)) for r in recs]
+    targets = [regression_targets(r, masses, model.topology) for r in recs]  # from a and the inputs, not x
+    recs = [restore_slow(r, y) for r, y in zip(recs, targets)]
     auto = isinstance(band, str) and band == "auto"
     band = _model_band(model) if auto else band
     damping_band = _damping_band(model) if auto else None
@@ -142,7 +143,7 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
 
         for k, r in enumerate(recs):
             col = COLOURS[k % len(COLOURS)]
-            y = regression_targets(r, masses, model.topology)[:, i]
+            y = targets[k][:, i]
             fr_, fd_ = forces(model, r.x, r.v, parts=True)
             res = y - (fr_ + fd_)[:, i]
             # an x integrated from v or a lost its content below the drift cut-off, and the fit leaves that band out
