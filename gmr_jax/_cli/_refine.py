@@ -70,7 +70,7 @@ def run(args) -> int:
                   f"{e['after'].windows})")
     if sol.result in (RESULTS.successful, RESULTS.nonlinear_max_steps_reached):
         stage("checking the refined model over longer horizons (free runs)")
-        longer, warn = _longer_horizons(gmr, sol.value, hold or train[:1], st["holdout" if hold else "train"])
+        longer, warn = _longer_horizons(sol.value, hold or train[:1], st["holdout" if hold else "train"])
         report["free_run"] = longer
         st["warnings"] = list(st["warnings"]) + warn
         report["warnings"] = list(st["warnings"])
@@ -108,15 +108,17 @@ def _pct(a) -> str:
     return ", ".join("failed" if not np.isfinite(v) else f"{100 * v:.3g} %" for v in a)
 
 
-def _longer_horizons(gmr, model, recs, windowed) -> tuple[list[dict], list[str]]:
+def _longer_horizons(model, recs, windowed) -> tuple[list[dict], list[str]]:
     """Free runs of the refined model on `recs` (`gmr.free_run`: the whole record, and restarts every input period
     where x was measured): the multiple-shooting windows restart from the recorded state, so a model that lacks a
     term (no damping at all, free coefficients that cannot stand in for it) can fit them and still leave the record
     within a period (hand-made Duffing without its damping term: windowed NRMSE 2.6 %, free run 826 %)."""
+    from .._simulate._free_run import free_run
+
     out, warn = [], []
     ref = float(windowed["after"].nrmse) if windowed is not None else np.nan
     for rec in recs:
-        run = gmr.free_run(model, rec, throw=False)
+        run = free_run(model, rec, throw=False)
         fr = run.value
         nrmse = np.asarray(fr.nrmse, float)
         h = None if fr.horizon_nrmse is None else np.asarray(fr.horizon_nrmse, float)
