@@ -124,6 +124,7 @@ def test_cli_actuate(tmp_path):
     res = json.loads((out / "actuation.json").read_text())
     assert res["kind"] == "half_sine" and res["A"] > 0 and res["f"] > 0
     assert res["reached"] is True and res["final_wells"] == [1, 1] and res["final_config"] == "1-1"
+    assert res["result"] == "successful" and res["message"] == ""  # the name (it was "" on success)
     assert main(["actuate", str(path), "--target", "0-1-1", "--out", str(out), "--x-range=-2:2"]) == 2
 
 

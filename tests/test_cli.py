@@ -54,7 +54,7 @@ def test_fit_hand_made_csv(joint_files, tmp_path, capsys):
     np.testing.assert_allclose([k[1], k[3]], [-2244, 1755], rtol=0.03)
     printed = capsys.readouterr().out
     assert "estimated from x" in printed and "F_0(x, v)" in printed
-    assert "no masses in the recordings and no --masses: each taken as 1" in printed  # said, not silent
+    assert "no masses in the recordings and no --masses: taken as 1" in printed  # said, not silent
     # the stored standard errors are printed, term by term, and agree with the file
     assert "std. error" in printed
     assert "What each well's data resolved" in printed and "resolution" in json.loads(out.read_text())

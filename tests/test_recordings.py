@@ -13,12 +13,33 @@ def rec(n=500, d=1):
 @pytest.mark.parametrize("ext", ["npz", "csv"])
 def test_round_trip(tmp_path, ext):
     r = rec(d=2)
-    r = g.Recording(t=r.t, x=r.x, v=r.x * 2, force=r.x * 3, masses=np.array([1.0, 2.0]) if ext == "npz" else None)
+    r = g.Recording(t=r.t, x=r.x, v=r.x * 2, force=r.x * 3, masses=np.array([1.0, 0.5]))
     p = tmp_path / f"r.{ext}"
     g.save_recording(r, p)
     r2 = g.load_recording(p)
-    for k in ("t", "x", "v", "force"):
+    for k in ("t", "x", "v", "force", "masses"):  # a CSV keeps the masses as columns m0, m1 (they were dropped)
         np.testing.assert_allclose(getattr(r2, k), getattr(r, k), rtol=1e-15 if ext == "npz" else 1e-12)
+
+
+def test_a_csv_mass_column_and_a_chain_without_masses(tmp_path):
+    """A one-DOF 'mass [kg]' column repeating one value is the recording's mass; one that varies is refused. A
+    chain fitted with no masses anywhere is warned (unit masses are a rescaling only when they are equal); one
+    DOF, or masses given, is not."""
+    from gmr_jax._reconstruct._reconstruct import _resolve
+
+    t = np.arange(0.0, 2.0, 1e-3)
+    x = 0.1 * np.sin(5 * t)
+    rows = "\n".join(f"{a:.17g},{b:.17g},{c:.17g}" for a, b, c in zip(t, x, np.full_like(t, 0.25)))
+    (tmp_path / "m.csv").write_text("t,x,mass [kg]\n" + rows)
+    assert g.load_recording(tmp_path / "m.csv").masses.tolist() == [0.25]
+    (tmp_path / "bad.csv").write_text("t,x,m\n" + rows.replace(",0.25\n", ",0.5\n", 1))
+    with pytest.raises(g.GMRInputError, match="the mass column varies over the record"):
+        g.load_recording(tmp_path / "bad.csv")
+    chain = [g.Recording(t=t, x=np.stack([x + e, x - e], 1), base_acc=np.sin(7 * t), name=f"c{e}") for e in (-1, 1)]
+    *_, warned = _resolve(chain, None, None)
+    assert any("no masses given" in w and "chain" in w for w in warned)
+    assert not any("no masses" in w for w in _resolve(chain, np.array([1.0, 0.5]), None)[-1])
+    assert not any("no masses" in w for w in _resolve(chain, None, "independent")[-1])
 
 
 @pytest.mark.parametrize("mutate,msg", [
@@ -114,7 +135,8 @@ def test_small_jitter_is_snapped_and_larger_jitter_resampled_with_a_warning(tmp_
     tg = np.delete(k * 1e-3, 2500)
     p = tmp_path / "gap.npz"
     np.savez(p, t=tg, x=np.sin(tg)[:, None], base_acc=np.sin(tg))
-    with pytest.raises(g.GMRInputError, match=r"not uniformly sampled.*0.001 of a step is accepted"):
+    with pytest.raises(g.GMRInputError, match=r"not uniformly sampled.*0.001 of a step is accepted.*first irregular "
+                       r"step is from sample 2499 \(t = 2.499 s\) to 2500 \(t = 2.501 s\), 2 x .*samples dropped"):
         g.load_recording(p)
 
 
@@ -153,6 +175,15 @@ def test_lab_files_with_a_column_mapping(tmp_path):
         np.testing.assert_allclose(r.t, t, rtol=1e-15, atol=0)
         np.testing.assert_allclose(r.x[:, 0], qm, rtol=1e-14)
         np.testing.assert_allclose(r.force[:, 0], 35.15 * vir, rtol=1e-14)
+    # names with a unit holding '/' are names, not divisions (longest match first), and scale as any name
+    (tmp_path / "units.csv").write_text("Zeit [s],Weg [m],Geschw [m/s],Kraft [N/V]\n" + "\n".join(
+        f"{a:.17g},{b:.17g},{c:.17g},{c:.17g}" for a, b, c in zip(t, qm, vir)))
+    r = g.load_recording(tmp_path / "units.csv", {"t": "Zeit [s]", "x": "Weg [m]", "v": "Geschw [m/s] / 2",
+                                                   "force": "35.15*Kraft [N/V]"})
+    np.testing.assert_allclose(r.v[:, 0], vir / 2, rtol=1e-15)
+    np.testing.assert_allclose(r.force[:, 0], 35.15 * vir, rtol=1e-14)
+    with pytest.raises(g.GMRInputError, match=r"v='Gesch \[m/s\]': 'Gesch \[m' is neither"):
+        g.load_recording(tmp_path / "units.csv", {"t": "Zeit [s]", "x": "Weg [m]", "v": "Gesch [m/s]"})
     # two DOFs, one expression each
     r = g.load_recording(tmp_path / "run.npz", {"x": ["qm", "2*qm"], "force": ["vir", "vir"]})
     assert r.x.shape == (2000, 2) and np.allclose(r.x[:, 1], 2 * qm)
@@ -280,6 +311,31 @@ def test_window_from_the_noise_floor_when_the_signal_is_clear_far_above_its_band
     # a band-limited noisy signal keeps the band-edge window (the noise floor starts at its edge)
     s = np.sin(2 * np.pi * 1.3 * t) + 0.5 * np.sin(2 * np.pi * 3.1 * t) + 1e-2 * rng.normal(size=t.size)
     assert window_choice(s, dt)["rule"] == "band edge"
+
+
+@pytest.mark.parametrize("above_floor", [True, pytest.param(False, marks=pytest.mark.xfail(strict=True))])
+def test_the_band_edge_is_the_signal_s_not_the_white_noise_s(rng, above_floor, monkeypatch):
+    """White noise holding more than 0.5 % of the power set the 99.5 % band edge inside the noise (a
+    Duffing well at 20 Hz, x only, 20 dB: 3.7 Hz for 0.37 Hz) and the window fell to the minimum. The
+    edge of a lightly damped response to a 0.1-0.35 Hz multisine, against scipy's periodogram of the clean
+    signal, stays put from 60 dB down to 10 dB, and the window with it."""
+    from scipy.signal import periodogram
+
+    from gmr_jax._recordings import _derivatives
+    from gmr_jax._recordings._derivatives import band_edge, window_choice
+
+    monkeypatch.setattr(_derivatives, "ABOVE_FLOOR", above_floor)
+    dt, n = 0.05, 6000
+    t = np.arange(n) * dt
+    s = sum(np.sin(2 * np.pi * f * t + p) / (1 + 20 * (f - 0.22) ** 2)
+            for f, p in zip(np.linspace(0.1, 0.35, 12), rng.uniform(0, 2 * np.pi, 12)))
+    f, p = periodogram(s - s.mean(), fs=1 / dt, window="hann")
+    clean = f[np.searchsorted(np.cumsum(p) / p.sum(), 0.995)]
+    w0 = window_choice(s, dt)["window"]
+    for snr in (60, 30, 20, 10):
+        noisy = s + np.std(s) * 10 ** (-snr / 20) * rng.normal(size=n)
+        assert abs(band_edge(noisy, dt) - clean) <= 0.15 * clean, snr
+        assert window_choice(noisy, dt)["window"] >= w0 - 2, snr
 
 
 def test_sampled_spline_input_is_smooth_and_matches_a_band_limited_signal():

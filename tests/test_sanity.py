@@ -332,6 +332,26 @@ def test_11_uncertainty_of_the_global_restoring_force_matches_sampling():
     assert _sanity.check_determination(0, k, c * 1e-4, -0.03, 0.03) == []  # 100x smaller sd: silent
 
 
+def test_11b_the_band_written_with_the_model_is_warned_when_it_is_wide():
+    """Rule 11b: the written (calibrated) band's restoring part, checked against a Monte Carlo draw, warned
+    above 2 % and twice the noise's own; silent when the noise accounts for it or it is narrow."""
+    k = np.array([0.0, -30.0, 0.0, 1e5])
+    noise = np.diag([1e-8, 1e-4, 1e-2, 1e2])  # the coordination's covariance: a fraction of a percent
+    disc = np.outer([1e-3, 3.0, 30.0, 3e4], [1e-3, 3.0, 30.0, 3e4])  # a discrepancy direction (rank one)
+    rel_noise = _sanity.restoring_uncertainty(k, noise, -0.03, 0.03)
+    assert rel_noise < 0.02 and _sanity.check_determination(0, k, noise, -0.03, 0.03) == []
+    (msg,) = _sanity.check_band(0, k, noise + disc, rel_noise, -0.03, 0.03)
+    wide = float(msg.split("is ±")[1].split(" %")[0]) / 100
+    xs = np.linspace(-0.03, 0.03, 201)
+    draws = np.random.default_rng(1).multivariate_normal(k, noise + disc, 20000)
+    sd = np.std(np.polynomial.polynomial.polyval(xs, draws.T), axis=0)
+    np.testing.assert_allclose(wide, 2 * np.linalg.norm(sd) / np.linalg.norm(np.polynomial.polynomial.polyval(xs, k)),
+                               rtol=0.03)
+    assert wide > 0.1 and "not determined" in msg and "noise's only" in msg
+    assert _sanity.check_band(0, k, noise, rel_noise, -0.03, 0.03) == []  # no discrepancy: silent
+    assert _sanity.check_band(0, k, noise + disc, 0.6 * wide, -0.03, 0.03) == []  # the noise accounts for it
+
+
 @pytest.mark.slow  # a full reconstruction
 def test_11_noisy_nes_is_warned_and_really_is_off():
     """NES at 20 dB, seed 0, 5 s records: the restoring force is 1.7 % off the truth (4 % before stop 40's

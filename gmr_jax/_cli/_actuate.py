@@ -75,7 +75,8 @@ def run(args):
         "reached": reached,
         "final_wells": st["verified_wells"],
         "final_config": config_label(int(st["verified_config"]), d),
-        "result": RESULTS[sol.result] if not reached else "",
+        "result": sol.status,  # the name: "successful", "target_not_found", ... (RESULTS[...] is its message)
+        "message": RESULTS[sol.result] if not reached else "",
         "solves": st["solves"],
         "gradient_evaluations": st["gradient_evaluations"],
         "objective": args.objective,

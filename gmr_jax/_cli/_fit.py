@@ -175,6 +175,10 @@ def run(args) -> int:
             print(f"  DOF {i}: wells recorded about x = {np.round(rep.equilibria, 6).tolist()} (the records' means; "
                   f"the model's own equilibria: gmr show), global orders "
                   f"K_r={rep.stats['K_r']}, K_d={rep.stats['K_d']}")
+    if model.n_dof > 1:
+        print(f"  topology: {model.topology.name} (" + ("x_i is cell i's deformation, x_i - x_(i-1); "
+              "--topology independent for separate masses)" if model.topology.name == "chain" else
+              "each DOF on its own; --topology chain for cells in series)"))
     for line in format_coordination(routes):
         print(line)
     for line in format_shared_design(design):
@@ -190,9 +194,9 @@ def run(args) -> int:
         print(line)
     for line in _derivation_notes(recs):
         print(line)
-    if masses is None and all(r.masses is None for r in recs):
-        print("  note: no masses in the recordings and no --masses: each taken as 1, so every coefficient is a force "
-              "per unit mass (pass --masses M0,M1,... for forces in the recordings' units)")
+    if masses is None and all(r.masses is None for r in recs) and model.n_dof == 1:  # a chain's: a warning
+        print("  note: no masses in the recordings and no --masses: taken as 1, so every coefficient is a force "
+              "per unit mass (pass --masses M or a column m in the CSV for forces in the recordings' units)")
     if png is not None:
         stage(f"writing the figure {png} (and .pdf)")
         from ..plots._fit import fit_figure

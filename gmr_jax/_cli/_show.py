@@ -155,7 +155,9 @@ def _term_table(model, d: dict, p: int) -> list[str]:
             lines.append(f"    {term_name(t['physics'], t['order']):16s} {t['physics']:17s} {_g(c, p):>13s} "
                          f"{se_s:>12s} {rel_s:>9s}{flag}")
     if has_se:
-        lines.append("  (* = the coefficient is within 2 standard errors of 0: the data do not pin it down)")
+        lines.append("  (std. error: from the data's noise; * = the coefficient is within 2 of them of 0: the data do not "
+                     "pin it down. The model's band (its covariance) adds the spread of the laws the wells' data admit "
+                     "and can be much wider: a rule-11b warning says so, the fit figure draws it)")
     else:
         lines.append("  (no standard errors stored in this file)")
     return lines

@@ -106,10 +106,18 @@ def _resolve(recordings, masses, topology, min_recordings=2, what="fit", exclude
         if r.n_dof != d:
             raise GMRInputError(f"{r.name}: has {r.n_dof} DOFs but {recs[0].name} has {d}")
     topology = as_topology(("chain" if d > 1 else "independent") if topology is None else topology)
+    warnings = []
     if masses is None:
         _sanity.check_masses([r.name for r in recs], [r.masses for r in recs])
         found = [r.masses for r in recs if r.masses is not None]
         masses = found[0] if found else np.ones(d)
+        if not found and d > 1 and topology.name != "independent":
+            # a chain's cells carry the masses beyond them: unit masses are a rescaling only when they are equal
+            # (hand-made 2-cell chain, masses 1 and 0.5, none given: cell 0 175 % off, damping x18)
+            warnings.append(f"no masses given (none in the recordings, no masses=/--masses): each taken as 1; in a "
+                            f"{topology.name} the cells carry the masses beyond them, so the cell forces are right "
+                            f"(per unit mass) only if the {d} masses are equal: give them (--masses M0,M1,..., a "
+                            f"column m0, m1, ... in each CSV, or Recording(masses=...))")
     masses = np.asarray(masses, float).reshape(-1)
     if masses.shape[0] != d or np.any(masses <= 0) or not np.all(np.isfinite(masses)):
         raise GMRInputError(f"masses must be {d} positive numbers, got {masses.tolist()}")
@@ -118,7 +126,6 @@ def _resolve(recordings, masses, topology, min_recordings=2, what="fit", exclude
             f"only {len(recs)} recording(s): the coordination needs small-vibration recordings "
             f"around at least two distinct equilibria (one file per equilibrium)"
         )
-    warnings = []
     for r in recs:
         warnings += _sanity.check_clipping(r.name, _measured_columns(r))
         warnings += _sanity.check_missing_input(r.name, r.x, r.base_acc is not None or r.force is not None)
@@ -1077,6 +1084,8 @@ def reconstruct(
         xall = np.concatenate(xcol)
         warnings += _sanity.check_determination(i, np.asarray(g.stiffness), np.asarray(coord.aux)[:n_k, :n_k],
                                                 float(xall.min()), float(xall.max()))
+        noise_rel = _sanity.restoring_uncertainty(g.stiffness, np.asarray(coord.aux), float(xall.min()),
+                                                  float(xall.max()))
         se = split_flat(np.sqrt(np.clip(np.diag(np.asarray(coord.aux)), 0.0, None)), g)
         if route == "joint" and float(coord.stats.get("joint_conflict", 0.0)) > JOINT_CONFLICT:
             warnings += _sanity.check_conflict(i, np.asarray(g.stiffness), np.asarray(coord.aux)[:n_k, :n_k],
@@ -1102,6 +1111,8 @@ def reconstruct(
         se = GlobalCoefficients(*(np.pad(np.asarray(a), (0, np.asarray(b).shape[0] - np.asarray(a).shape[0]))
                                   for a, b in zip((se.stiffness, se.velocity_damping, se.position_damping),
                                                   (g.stiffness, g.velocity_damping, g.position_damping))))
+        warnings += _sanity.check_band(i, np.asarray(g.stiffness), cov_i, noise_rel, float(xall.min()),
+                                       float(xall.max()))  # rule 11b: the band written with the model
         covs.append(cov_i)
         stiff.append(np.asarray(g.stiffness)), vdamp.append(np.asarray(g.velocity_damping))
         pdamp.append(np.asarray(g.position_damping))

@@ -5,7 +5,7 @@ Golay 1964): a polynomial smoother whose window trades noise against bias. The w
 from the data when not given (`window_choice`), as the smaller of two:
 
 - **band edge**: the odd window spanning 0.3 of the period at the signal's band edge (the
-  frequency below which 99.5 % of its power lies), so that a quintic follows the signal while
+  frequency below which 99.5 % of its power above the white noise floor lies), so that a quintic follows the signal while
   averaging many samples of noise;
 - **noise floor**: the window whose -3 dB cut-off (Schafer 2011: f_c / f_Nyquist ~ (p + 1) /
   (3.2 M - 4.6), window 2M + 1, p the degree) is the highest frequency at which the signal still
@@ -50,9 +50,30 @@ def _power(x: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
     return np.fft.rfftfreq(x.size, dt), p
 
 
+#: the band edge counts the power above the white noise floor (`band_edge`; False: all the power, as before) ...
+ABOVE_FLOOR = True
+#: ... where the noise holds more than this share of the power the edge leaves out (1 - fraction, 0.5 %): from about
+#: 26 dB down. Above, the edge is as before (the shallow arch, x only, 30 dB, 0.45 %: the floor's 1 % shift of the
+#: edge moved one record's window from 13 to 15 samples, and seeds 0-3 went 1.3/6.3/4.7/8.0 % -> 7.9/5.3/4.5/9.3 %:
+#: the window's luck, not a gain)
+NOISE_SHARE = 0.5
+
+
 def band_edge(x: np.ndarray, dt: float, fraction: float = 0.995) -> float:
-    """Frequency below which `fraction` of the power of x (mean removed) lies, in Hz."""
+    """Frequency below which `fraction` of the power of x (mean removed) above its white noise floor
+    lies, in Hz. The floor, the mean level of the top fifth of the band (its periodogram's median / ln 2,
+    robust to lines), is taken off every bin where the noise holds more than `NOISE_SHARE` of 1 - `fraction`
+    of the power: white noise holding more than 1 - `fraction` otherwise sets the edge inside the noise (a
+    Duffing well sampled at 20 Hz, x only: 0.37 Hz clean, 3.7 Hz at 20 dB, and the Savitzky-Golay window fell
+    from 17 samples to 7, a 60 % restoring error; with the floor off, 0.36-0.40 Hz from 60 dB to 15 dB, 0.1-0.2 %
+    error)."""
     freqs, p = _power(x, dt)
+    if ABOVE_FLOOR and freqs.size >= 10:
+        floor = float(np.median(p[freqs >= 0.8 * freqs[-1]])) / np.log(2.0)  # white noise's periodogram: exponential
+        above = p - floor
+        if floor * p.size > NOISE_SHARE * (1.0 - fraction) * np.sum(p) and np.sum(above) > 0:
+            c = np.cumsum(above) / np.sum(above)  # not clipped at 0: the noise's excursions cancel
+            return float(freqs[int(np.argmax(c >= fraction))])
     c = np.cumsum(p) / max(np.sum(p), 1e-300)
     return float(freqs[min(int(np.searchsorted(c, fraction)), freqs.size - 1)])
 

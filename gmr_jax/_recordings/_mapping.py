@@ -90,9 +90,18 @@ def read_mat73(path: Path, src: str) -> dict:
 
 
 def _evaluate(expr: str, variables: dict, field: str, src: str):
+    # a file's names that hold * or / ("v [m/s]") are names, not operations: matched whole, longest first
+    given, names = expr, sorted(variables)
+    named = sorted((k for k in variables if ("*" in k or "/" in k) and k in expr), key=len, reverse=True)
+    alias = {}
+    for j, k in enumerate(named):
+        alias[f"\x00{j}\x00"] = k
+        expr = expr.replace(k, f"\x00{j}\x00")
+    if alias:
+        variables = {**variables, **{a: variables[k] for a, k in alias.items()}}
     parts = _TOKEN.split(expr.strip())
     if not expr.strip() or len(parts) % 2 == 0:
-        raise GMRInputError(f"{src}: column mapping {field}={expr!r}: write names and numbers joined by * or /")
+        raise GMRInputError(f"{src}: column mapping {field}={given!r}: write names and numbers joined by * or /")
     value, op = None, "*"
     for i, tok in enumerate(parts):
         if i % 2:
@@ -104,8 +113,8 @@ def _evaluate(expr: str, variables: dict, field: str, src: str):
             try:
                 term = np.asarray(float(tok))
             except ValueError:
-                raise GMRInputError(f"{src}: column mapping {field}={expr!r}: {tok!r} is neither a variable of the "
-                                    f"file nor a number; the file has {sorted(variables)}") from None
+                raise GMRInputError(f"{src}: column mapping {field}={given!r}: {tok!r} is neither a variable of the "
+                                    f"file nor a number; the file has {names}") from None
         value = term if value is None else (value * term if op == "*" else value / term)
     return value
 

@@ -364,10 +364,20 @@ def _uniform_time(out: dict, resolution: float, src: str) -> dict:
             else:
                 res[key] = np.stack([np.interp(grid, t, val[:, k]) for k in range(val.shape[1])], 1)
         return res
+    typical = float(np.median(dt))
+    odd = np.nonzero(np.abs(dt - typical) > 0.25 * typical)[0]  # where the step is not the usual one
+    where = ""
+    if odd.size:
+        i = int(odd[0])
+        where = (f"; the first irregular step is from sample {i} (t = {t[i]:.6g} s) to {i + 1} (t = {t[i + 1]:.6g} "
+                 f"s), {dt[i] / typical:.3g} x the usual {typical:.4g} s" + (
+                     f", and {odd.size - 1} more after it" if odd.size > 1 else "") + (
+                     " (samples dropped?)" if dt[i] > 1.5 * typical else ""))
     raise GMRInputError(
         f"{src}: time is not uniformly sampled (steps from {dt.min():.3g} to {dt.max():.3g} s, "
         f"stamps up to {dev / step:.2g} of a step off a uniform grid; up to {SNAP_JITTER:g} of a step "
-        f"is accepted as is, up to {RESAMPLE_JITTER:g} resampled); resample onto a uniform grid first"
+        f"is accepted as is, up to {RESAMPLE_JITTER:g} resampled){where}; resample onto a uniform grid first, "
+        f"or cut the record at the gap"
     )
 
 
@@ -384,6 +394,12 @@ def save_recording(rec: Recording, path) -> None:
         if rec.base_acc is not None:
             cols.append(rec.base_acc[:, None])
             names.append("base_acc")
+        for key, pre in (("masses", "m"), ("equilibrium", "equilibrium")):  # one value per DOF, on every row
+            val = getattr(rec, key)
+            if val is not None:
+                val = np.atleast_1d(np.asarray(val, float))
+                cols.append(np.broadcast_to(val, (rec.t.shape[0], val.shape[0])))
+                names += [f"{pre}{i}" for i in range(val.shape[0])]
         np.savetxt(path, np.hstack(cols), delimiter=",", header=",".join(names), comments="")
         return
     data = {k: getattr(rec, k) for k in SIGNALS}
@@ -393,7 +409,8 @@ def save_recording(rec: Recording, path) -> None:
 
 #: CSV headers of a one-DOF recording read as the numbered columns (an extension of the contract's
 #: t, x0.., v0.., a0.., f0..: the names lab files and the NPZ keys use)
-_CSV_ALIASES = {"x": "x0", "v": "v0", "a": "a0", "f": "f0", "force": "f0", "equilibrium": "equilibrium0"}
+_CSV_ALIASES = {"x": "x0", "v": "v0", "a": "a0", "f": "f0", "force": "f0", "equilibrium": "equilibrium0",
+                "m": "m0", "mass": "m0", "masses": "m0"}
 
 
 def _read_csv(path: Path, src: str, raw: bool = False):
@@ -416,8 +433,9 @@ def _read_csv(path: Path, src: str, raw: bool = False):
     if _numbers(header):
         raise GMRInputError(f"{src}: the first line holds numbers ({lines[0][:60].strip()}), not column names: a "
                             f"header row is needed, e.g. t,x,v,a,base_acc (see `gmr fit --help`), as the first line")
-    expected = ("t, x0.. (one per DOF; or v0.. or a0.. alone), optional v0.., a0.., f0.., base_acc, equilibrium0.. "
-                "(one DOF: x, v, a, f or force, equilibrium also read as x0, v0, a0, f0, equilibrium0)")
+    expected = ("t, x0.. (one per DOF; or v0.. or a0.. alone), optional v0.., a0.., f0.., base_acc, m0.. (masses), "
+                "equilibrium0.. (one DOF: x, v, a, f or force, m or mass, equilibrium also read as x0, v0, a0, f0, m0, "
+                "equilibrium0)")
     t_scale = 1.0
     if not raw:  # the names a one-DOF lab file uses (and the NPZ keys), in any case, with a unit: "v [m/s]"
         header, t_scale = _standard_names(header, src)
@@ -425,7 +443,7 @@ def _read_csv(path: Path, src: str, raw: bool = False):
     def known(h):
         if h in ("t", "base_acc"):
             return True
-        return any(h.startswith(p) and h[len(p):].isdigit() for p in ("x", "v", "a", "f", "equilibrium"))
+        return any(h.startswith(p) and h[len(p):].isdigit() for p in ("x", "v", "a", "f", "m", "equilibrium"))
 
     unknown = [] if raw else [h for h in header if not known(h)]
     if unknown or (not raw and ("t" not in header or not {"x0", "v0", "a0"} & set(header))):
@@ -474,11 +492,13 @@ def _read_csv(path: Path, src: str, raw: bool = False):
                                 f"{', '.join(pre + str(i) for i in missing)} missing")
         return np.stack([col[f"{pre}{i}"] for i in idx], axis=1)
 
-    eq = group("equilibrium")
+    eq, masses = group("equilibrium"), group("m")
     if eq is not None:
         eq = repeated_value(eq, "equilibrium", "the 'equilibrium' column", src)
+    if masses is not None:
+        masses = repeated_value(masses, "masses", "the mass column", src)
     return Recording(t=col["t"] * t_scale, x=group("x"), v=group("v"), a=group("a"),
-                     base_acc=col.get("base_acc"), force=group("f"), name=path.stem, equilibrium=eq)
+                     base_acc=col.get("base_acc"), force=group("f"), name=path.stem, equilibrium=eq, masses=masses)
 
 
 #: a time column's unit in a CSV header ("t [ms]"): its factor to seconds
@@ -498,7 +518,7 @@ def _numbers(cells) -> bool:
 def _standard_names(header, src):
     """A CSV header's names as the contract's (`x0`, `v0`, ...): a unit in brackets or parentheses taken off
     ("v [m/s]", "t (ms)"), the case ignored where the lower-case name is the contract's, `time` read as `t`, and the
-    one-DOF names (`x`, `v`, `a`, `f`, `force`, `equilibrium`) as `x0`, ... The time column's unit, where given,
+    one-DOF names (`x`, `v`, `a`, `f`, `force`, `m`, `mass`, `masses`, `equilibrium`) as `x0`, `m0`, ... The time column's unit, where given,
     scales it to seconds (`TIME_UNITS`); the others' units are the model's (not converted). Returns the names and
     the factor of t."""
     out, t_scale = [], 1.0
@@ -507,7 +527,7 @@ def _standard_names(header, src):
         name, unit = (m.group(1).strip(), m.group(2).strip()) if m else (h, None)
         low = name.lower()
         low = "t" if low == "time" else low
-        if low == "t" or low == "base_acc" or _CSV_ALIASES.get(low) or re.fullmatch(r"(x|v|a|f|equilibrium)\d+", low):
+        if low == "t" or low == "base_acc" or _CSV_ALIASES.get(low) or re.fullmatch(r"(x|v|a|f|m|equilibrium)\d+", low):
             name = low
         name = _CSV_ALIASES.get(name, name)
         if name == "t" and unit is not None:
