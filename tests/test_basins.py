@@ -410,3 +410,38 @@ def test_coulomb_friction_is_smoothed_below_the_settled_speed_and_said(batching)
     assert len(set(np.asarray(auto.value.config).ravel().tolist())) >= 2
     # a model without sgn(v) is not touched
     assert basin_map(chain(), f[:2], A[:1], wells).stats["sign_eps"] is None
+
+
+def test_cli_basins_notes_the_amplitudes_that_push_beyond_the_fitted_range(tmp_path):
+    """The tip half-sine's static force against the largest restoring force over the model file's data_range
+    (Duffing -x + x^3 on [-1.1, 1.1]: max 2 / (3 sqrt 3) = 0.385 at the hump): amplitudes above it are named, with
+    the static deflection at the largest (x^3 - x = 1: x = 1.3247, NumPy's root); none above: silent; base
+    load on a chain: per the masses each cell carries."""
+    import json
+
+    from gmr_jax._cli._basins import _beyond_data
+
+    duffing = g.from_terms([1.0], [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -1.0},
+                                   {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 1.0}],
+                           topology="independent")
+    path = tmp_path / "m.json"
+    g.save_model(duffing, path)
+    doc = json.loads(path.read_text())
+    doc["data_range"] = [[-1.1, 1.1]]
+    path.write_text(json.dumps(doc))
+    said = _beyond_data(duffing, path, np.array([0.1, 0.5, 1.0]), "tip")
+    a_star = 2 / (3 * np.sqrt(3))
+    root = max(r.real for r in np.roots([1, 0, -1, -1]) if abs(r.imag) < 1e-12)
+    assert f"A > {a_star:.4g} (2 of 3 amplitudes)" in said and f"x = {root:.4g}" in said
+    assert _beyond_data(duffing, path, np.array([0.1, 0.3]), "tip") is None
+    doc.pop("data_range")
+    path.write_text(json.dumps(doc))
+    assert _beyond_data(duffing, path, np.array([1.0]), "tip") is None  # no range recorded: nothing to say
+    chain = g.from_terms([1.0, 0.5], [{"dof": i, "physics": "stiffness", "order": k, "coefficient": c}
+                                      for i in (0, 1) for k, c in ((1, -1.0), (3, 1.0))], topology="chain")
+    g.save_model(chain, path)
+    doc = json.loads(path.read_text())
+    doc["data_range"] = [[-1.1, 1.1], [-1.1, 1.1]]
+    path.write_text(json.dumps(doc))
+    base = _beyond_data(chain, path, np.array([0.3, 0.5]), "base")  # cell 0 carries 1.5: A* = 0.385 / 1.5
+    assert f"A > {a_star / 1.5:.4g} (2 of 2 amplitudes)" in base and "cell 0" in base

@@ -61,6 +61,54 @@ def _compile_seconds() -> float:
     return _COMPILE["seconds"] + BUILD_SECONDS[0]
 
 
+def _beyond_data(model, model_path, A, load: str) -> str | None:
+    """Where the grid's loads must push the model beyond the range it was fitted on: the largest restoring
+    force each DOF (cell) reached over its training range (the model file's `data_range`, `gmr fit`) against
+    the static force the load puts on it (tip: A on every cell of a chain, on the last DOF of independent
+    ones; base: A times the masses it carries). Above A* = the smallest such ratio no static equilibrium of
+    the load lies in the range, so the trajectory leaves it and the map extrapolates the model (a bound:
+    the dynamic overshoot leaves it at lower A too). A sentence, or None (no data range, or no A above A*)."""
+    import json
+
+    try:
+        rng = json.loads(open(model_path).read()).get("data_range")
+    except (OSError, ValueError, AttributeError):
+        rng = None
+    if rng is None or np.max(A) <= 0:
+        return None
+    d = model.n_dof
+    rng = np.asarray(rng, float).reshape(d, 2)
+    stiff = np.asarray(model.stiffness, float)
+    masses = np.asarray(model.masses, float)
+    if load == "base":
+        per = np.asarray(model.topology.carried(masses[None, :]))[0]
+    elif model.topology.name == "chain":
+        per = np.ones(d)
+    else:
+        per = np.where(np.arange(d) == d - 1, 1.0, 0.0)
+    stars = []
+    for i in range(d):
+        if per[i] <= 0:
+            continue
+        f = np.polynomial.polynomial.polyval(np.linspace(rng[i, 0], rng[i, 1], 401), stiff[i])
+        stars.append((max(float(np.max(f)), 0.0) / per[i], i))  # a positive load pushes towards +x
+    if not stars:
+        return None
+    a_star, i = min(stars)
+    over = int(np.sum(A > a_star))
+    if over == 0:
+        return None
+    roots = np.polynomial.polynomial.polyroots(stiff[i] - np.eye(stiff.shape[1])[0] * float(np.max(A)) * per[i])
+    out = roots[(np.abs(roots.imag) < 1e-9) & (roots.real > rng[i, 1])].real
+    where = (f"the static deflection at A = {float(np.max(A)):.4g} is x = {float(np.min(out)):.4g}" if out.size else
+             f"at A = {float(np.max(A)):.4g} the model has no static equilibrium beyond it")
+    return (f"at A > {a_star:.4g} ({over} of {A.size} amplitudes) the load exceeds the largest restoring force "
+            f"{'cell' if model.topology.name == 'chain' and d > 1 else 'DOF'} {i} reached over its recorded range "
+            f"[{rng[i, 0]:.4g}, {rng[i, 1]:.4g}] (the model file's data_range; {where}): those trajectories go "
+            f"beyond the motion the model was fitted on, and the map there is the model's extrapolation (a static "
+            f"bound: dynamic overshoot goes beyond at lower A too)")
+
+
 def _settle_advice(model, wells, settle_time: float, max_configs: int = 64) -> str:
     """What to pass where points had not settled: the slowest decay rate sigma of the model's free
     motion about its stable configurations (each DOF at one of its wells; the eigenvalues of the
@@ -155,6 +203,9 @@ def run(args) -> int:
               f"of the settled-speed test (SweepSettings.sign_eps)")
     print(f"{n} points in {wall:.1f} s ({n / wall:.0f} trajectories/s, batching {sol.stats['batching']}); of which "
           f"compiling {comp:.1f} s" + ("" if comp > 0 else " (compiled programs loaded from the cache)"))
+    beyond = _beyond_data(model, args.model, A, args.load)
+    if beyond:
+        print(f"  note: {beyond}")
     print(f"wrote {out}/basins.npz and basins.png (.pdf)")
     stage("done")
     return 0

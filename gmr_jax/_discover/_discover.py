@@ -342,7 +342,8 @@ def discover(
     settings = {"form": form, "support": support, "decimate": int(decimate),
                 "refit_masses": bool(refit_masses), "derivatives":
                 "recorded" if not estimated else "Savitzky-Golay (quintic, automatic window: the smaller of "
-                "0.3 period at the 99.5 % band edge and the window whose cut-off is where the spectrum meets "
+                "0.3 period at the 99.5 % band edge of the power above the noise floor and the window whose cut-off "
+                "is where the spectrum meets "
                 "10 x its noise floor) for the missing signals" + (
                     "; weak form: no acceleration used" if form == "weak" else ""),
                 "derivative_windows": windows, "form_reason": _form_reason(form_asked, form, estimated, clear,
@@ -527,7 +528,9 @@ def discover(
                                    if why else "output error not asked for")
         e["nrmse"] = e["output_nrmse"] if use_output else e["equation_nrmse"]
         e["on"] = "holdout" if hold else "estimation (no holdout given)"
-    warns = []
+    warns = [f"{r.name}: has no input column (base_acc or force), so it was taken as a free decay; if the "
+             f"structure was driven, add its input column (or map it: --columns base_acc=NAME)"
+             for r in list(recordings) + list(holdout or []) if r.base_acc is None and r.force is None]
     if after["nrmse"] > before["nrmse"] * 1.05:
         warns.append(
             f"the augmented model is worse than the given one on the {before['on']} ({kind} error NRMSE "

@@ -74,6 +74,13 @@ def summary(report) -> str:
                      f"{b['crossings_model']} before, {a['crossings_model']} after): a free run can leave such a "
                      f"record even with an exact model; runs of {b['horizon_s']:.3g} s from the recorded state: "
                      f"NRMSE {100 * b['horizon_nrmse']:.3g} % -> {100 * a['horizon_nrmse']:.3g} %")
+    shown = report.findings or any(c["model_value"] != 0 and not (c["ci95"][0] <= 0 <= c["ci95"][1])
+                                   for c in report.corrections)
+    if shown and report.settings.get("derivative_windows"):  # estimated derivatives: the intervals are the noise's
+        lines.append("  the 95 % intervals are the noise's (block bootstrap); they leave out the bias that "
+                     "derivatives estimated from a noisy signal give least squares (errors in variables): a "
+                     "correction of a few % whose interval excludes 0 can be that bias, not a mis-calibration "
+                     "(the exact model on x-only records at 20 dB: linear stiffness and mass -1 to -2 %)")
     if b["kind"] == "equation" and b.get("why_not_output"):
         lines.append(f"  error measure: equation (force) error, not simulation (output) error: {b['why_not_output']}")
     for w in report.warnings:

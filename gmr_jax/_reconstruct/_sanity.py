@@ -453,15 +453,21 @@ def check_determination(dof: int, stiffness, covariance, x_lo: float, x_hi: floa
             f"longer records or less noise would tighten it"]
 
 
+#: rule 11b: the band written with the model (its restoring part, as rule 11 measures it) above this share
+MAX_BAND = 0.10
+
+
 def check_band(dof: int, stiffness, calibrated, noise: float, x_lo: float, x_hi: float) -> list[str]:
     """Rule 11b: the model file's band on the restoring force (`calibrated`: the covariance written
     with the model, which adds the discrepancy between the laws the wells' data admit, `_discrepancy`)
-    where it is above `MAX_RESTORING_UNCERTAINTY` and twice the noise's alone (`noise`, rule 11's
-    measure): a law the noise pins down can still be one of many that pass through the wells' data
-    (a hand-made truss law, one sine per well, 40 dB: noise ±1 %, the written band ±236 %, the law 38 %
-    off between the wells, and no warning before)."""
+    where it is above `MAX_BAND` and twice the noise's alone (`noise`, rule 11's measure): a law the
+    noise pins down can still be one of many that pass through the wells' data (a hand-made truss law,
+    one sine per well, 40 dB: noise ±1.9 %, the written band ±236 %, the law 38 % off between the wells,
+    and no warning before). Not at rule 11's 2 %: the band is conservative on the paper's joint (40 dB,
+    seeds 0/1: ±7.2/2.2 % for errors of 0.012/0.025 %; 30 dB: ±23/7.1 % for 0.04/0.13 %), where a
+    warning at 2 % would call good models undetermined; at 10 % the 30 dB seed 0 is still warned."""
     wide = restoring_uncertainty(stiffness, calibrated, x_lo, x_hi)
-    if wide <= max(MAX_RESTORING_UNCERTAINTY, 2.0 * noise):
+    if wide <= max(MAX_BAND, 2.0 * noise):
         return []
     return [f"DOF {dof}: the model's band on the restoring force (the covariance written with it) is "
             f"±{100 * wide:.2g} % (two standard deviations, RMS over the recorded range [{_g(x_lo)}, "
