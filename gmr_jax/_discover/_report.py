@@ -21,6 +21,28 @@ def _range(vals) -> str:
     return lo if lo == hi else f"{lo}-{hi}"
 
 
+def _split(report) -> list:
+    """(dof, candidate, its forward step, its bootstrap share, {other candidate: share}) for each candidate the
+    forward selection accepted that failed only the bootstrap stability, where it and the candidates selected
+    instead in at least a tenth of the replicates together reach the rule's stability share: the data show a
+    missing term, not which (hand-made Duffing, x only, 30 dB, the cubic left out: x^3 p = 1e-21, validation
+    gain 67 %, then x^3 in 60 % and x^5 in 40 % of the replicates; it read "Nothing missing")."""
+    need = float((report.settings.get("rule") or {}).get("stability", 0.8))
+    found = {(f["dof"], f.get("basis")) for f in report.findings}
+    out = []
+    for s in report.selection:
+        unstable = {r["term"] for r in s.get("rejected", []) if "bootstrap replicates" in r["reason"]}
+        for step in s.get("steps", []):
+            c = step["candidate"]
+            if not step["accepted"] or c not in unstable:
+                continue
+            others = {k: v for k, v in s["stability"].items()
+                      if k != c and v >= 0.1 and (s["dof"], k) not in found}
+            if others and s["stability"][c] + sum(others.values()) >= need:
+                out.append((s["dof"], c, step, s["stability"][c], others))
+    return out
+
+
 def summary(report) -> str:
     """Plain-words summary: one sentence per finding, with evidence and uncertainty."""
     b, a = report.before, report.after
@@ -40,10 +62,18 @@ def summary(report) -> str:
             f"p = {f['p_value']:.2g}, validation gain {100 * f['cv_gain']:.1f} %; {err}.")
     big = [c for c in report.corrections if c["model_value"] != 0 and not (c["ci95"][0] <= 0 <= c["ci95"][1])
            and abs(c["coefficient"]) > LARGE_CORRECTION * abs(c["model_value"])]
-    if not report.findings and not big:
+    split = _split(report)
+    for dof, c, step, share, others in split:
+        lines.append(f"A term is missing on {_cell(report, dof)}, but these data do not say which: {c} passed the "
+                     f"forward selection (p = {step['p_value']:.2g}, validation gain {100 * step['cv_gain']:.1f} %), "
+                     f"and the bootstrap replicates split it: {c} in {100 * share:.0f} %, "
+                     + ", ".join(f"{k} in {100 * v:.0f} %" for k, v in others.items())
+                     + " of them; candidates that stand in for each other in these data (longer or larger records "
+                       f"separate them), none reported; the re-calibrated terms absorb it meanwhile; {err}.")
+    if not report.findings and not big and not split:
         lines.append(f"Nothing missing: no candidate physics passed the selection rule on any "
                      f"{'cell' if report.given.topology.name == 'chain' else 'DOF'}; {err}.")
-    elif not report.findings:  # the terms moved a lot: they may stand in for what the rule did not admit
+    elif not report.findings and not split:  # the terms moved a lot: they may stand in for what the rule did not admit
         worst = max(big, key=lambda c: abs(c["coefficient"] / c["model_value"]))
         what = "mass" if worst["physics"] == "mass" else f"{worst['physics']} ({worst.get('family')} {worst.get('order')})"
         held = sorted({r["physics"] for s in report.selection for r in s["rejected"]})
@@ -79,7 +109,8 @@ def summary(report) -> str:
     if shown and report.settings.get("derivative_windows"):  # estimated derivatives: the intervals are the noise's
         lines.append("  the 95 % intervals are the noise's (block bootstrap); they leave out the bias that "
                      "derivatives estimated from a noisy signal give least squares (errors in variables): a "
-                     "correction of a few % whose interval excludes 0 can be that bias, not a mis-calibration "
+                     "correction of a few % whose interval excludes 0 can be that bias (or stand in for a term the rule did not "
+                     "admit), not a mis-calibration "
                      "(the exact model on x-only records at 20 dB: linear stiffness and mass -1 to -2 %)")
     if b["kind"] == "equation" and b.get("why_not_output"):
         lines.append(f"  error measure: equation (force) error, not simulation (output) error: {b['why_not_output']}")
