@@ -221,21 +221,30 @@ def holdout_errors(model, recs, settings: dict, error: str = "auto") -> dict:
         if sims is not None:
             out["output_nrmse"] = float(np.sqrt(num / den))
             out["_sims"] = sims
-            out |= _short_runs(model, recs, sims)
+            out |= _short_runs(model, recs, sims, always=out["output_nrmse"] > SENSITIVE)
     return out
 
 
-def _short_runs(model, recs, sims) -> dict:
-    """Where a holdout crosses between wells a free run can leave it even with an exact model
-    (sensitive dependence): the model's runs of one dominant input period from the recorded state
-    (`_simulate._free_run.horizon_runs`, NRMSE pooled as the output error's) and the well-to-well
-    crossings of the records and of the free runs (`crossings`). Records with an integrated x are
-    left out; {} when none is left or nothing crosses."""
+#: a free run this far off the holdout (output NRMSE) is also judged over one-period restarts (`_short_runs`), and
+#: the given and augmented models are compared there: a sensitive (chaotic) response leaves the record even under an
+#: exact model (a hand-made hardening Duffing in one well: the exact model 94-132 %, and "the augmented model is
+#: worse" in 5 of 10 runs at random)
+SENSITIVE = 0.3
+
+
+def _short_runs(model, recs, sims, always: bool = False) -> dict:
+    """Where a holdout crosses between wells (or, with `always`, wherever the free run left it) a free run can
+    leave it even with an exact model (sensitive dependence): the model's runs of one dominant input period from
+    the recorded state (`_simulate._free_run.horizon_runs`, NRMSE pooled as the output error's) and the
+    well-to-well crossings of the records and of the free runs (`crossings`). Records with an integrated x are
+    left out; {} when none is left or nothing crosses (and not `always`)."""
     from .._simulate._free_run import crossings, horizon_runs
 
     kept = [(r, x, sim_start(r)) for r, x in zip(recs, sims) if "x" not in r.derived]
+    if not kept:
+        return {}
     measured = sum(int(np.sum(np.maximum(crossings(model, r.x[k:], None), 0))) for r, _, k in kept)
-    if measured == 0:  # single-well holdouts (the common case): the free run is the measure
+    if measured == 0 and not always:  # single-well holdouts (the common case): the free run is the measure
         return {}
     model_runs = sum(int(np.sum(np.maximum(crossings(model, r.x[k:], x), 0))) for r, x, k in kept)
     num = den = 0.0
@@ -528,13 +537,21 @@ def discover(
                                    if why else "output error not asked for")
         e["nrmse"] = e["output_nrmse"] if use_output else e["equation_nrmse"]
         e["on"] = "holdout" if hold else "estimation (no holdout given)"
+    # a free run that left the holdout under the given model: the two compared over one-period restarts
+    short = (use_output and before.get("output_nrmse", 0.0) > SENSITIVE and "horizon_nrmse" in before
+             and "horizon_nrmse" in after)
+    worse = (after["horizon_nrmse"] > before["horizon_nrmse"] * 1.05 if short else
+             after["nrmse"] > before["nrmse"] * 1.05)
     warns = [f"{r.name}: has no input column (base_acc or force), so it was taken as a free decay; if the "
              f"structure was driven, add its input column (or map it: --columns base_acc=NAME)"
              for r in list(recordings) + list(holdout or []) if r.base_acc is None and r.force is None]
-    if after["nrmse"] > before["nrmse"] * 1.05:
+    if worse:
         warns.append(
-            f"the augmented model is worse than the given one on the {before['on']} ({kind} error NRMSE "
-            f"{100 * before['nrmse']:.3g} % -> {100 * after['nrmse']:.3g} %): the data do not support "
+            f"the augmented model is worse than the given one on the {before['on']} ("
+            + (f"runs of {before['horizon_s']:.3g} s from the recorded state, NRMSE {100 * before['horizon_nrmse']:.3g}"
+               f" % -> {100 * after['horizon_nrmse']:.3g} %; the free runs leave it" if short else
+               f"{kind} error NRMSE {100 * before['nrmse']:.3g} % -> {100 * after['nrmse']:.3g} %")
+            + "): the data do not support "
             f"its changes; keep the given model" + (" and treat the findings as unconfirmed" if findings else
                                                     " (the re-calibration fitted the estimation data only)"))
     report = DiscoveryReport(findings, corrections, before, after, aug, model, location, selection,
