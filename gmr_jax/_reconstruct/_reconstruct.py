@@ -632,8 +632,10 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                 if odd is not None:
                     coord = paper = odd
                     confining, unconfirmed = True, False
-                    why = why + ["replaced by the highest odd degree below it fitted to all the local conditions "
-                                 f"(an even degree cannot confine; chi-squared p = {float(odd.stats['p_r']):.3g})"]
+                    fit = (f"chi-squared p = {float(odd.stats['p_r']):.3g}" if float(odd.stats["dof_r"]) > 0 else
+                           "as many conditions as coefficients: it interpolates them")
+                    why = why + [f"replaced by the odd degree-{int(odd.stats['K_r'])} law fitted to all the local "
+                                 f"conditions (an even degree cannot confine; {fit})"]
                 # ... but an even degree cannot confine on both sides whatever the bound says (magnetic
                 # bistable, 30 dB, F'' resolved at one well only: an exact quartic kept for want of a
                 # reachable escape was 72 % off, the joint law 45 %; a paper law replaced by the odd degree
@@ -681,7 +683,7 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                                  f"coefficients confirm its shape"]
     if lowered:
         coord.stats["degree_notes"] = lowered  # why a borrowed law has the degree it has (`_degree`)
-    return coord, route, why + lowered, paper_sound, confining, warnings
+    return coord, route, lowered + why, paper_sound, confining, warnings  # in the order they were decided
 
 
 def _v_noise_report(v_noise, applied: bool) -> list[dict | None]:
@@ -1052,7 +1054,8 @@ def reconstruct(
             # the law with the borrowed orders was inadmissible and the joint regression (which sees
             # only this cell's data) would replace it: the cell goes on alone (torque-free Kresling,
             # 1 mm, seed 3, cell 4: an outward-turning nonic, then a joint law 86 % off)
-            design_why = "the borrowed orders gave an inadmissible law: " + "; ".join(why[:1])
+            faults = [n for n in why if n not in coord.stats.get("degree_notes", [])]  # not the degree's notes
+            design_why = "the borrowed orders gave an inadmissible law: " + "; ".join(faults[:1])
             fits, borrowed = (curvature_only(data_fits, library) if integrated else data_fits), []
             coord, route, why, paper_sound, confining, found = _coordinate_dof(
                 fits, xs, vs, ys, w, library, coordination, float(masses[i]), i, x_noise=x_noises[i],
