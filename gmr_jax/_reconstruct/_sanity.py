@@ -471,11 +471,11 @@ def check_band(dof: int, stiffness, calibrated, noise: float, x_lo: float, x_hi:
         return []
     return [f"DOF {dof}: the model's band on the restoring force (the covariance written with it) is "
             f"±{100 * wide:.2g} % (two standard deviations, RMS over the recorded range [{_g(x_lo)}, "
-            f"{_g(x_hi)}]), against ±{100 * noise:.2g} % from the data's noise alone: laws that differ that "
-            f"much between the wells all fit the wells' data, so the force between the wells, the saddle "
-            f"and the barriers are not determined (the printed standard errors are the noise's only); "
-            f"gmr show and the fit figure draw the band; records that reach further from each well "
-            f"(larger or broadband excitation) would narrow it"]
+            f"{_g(x_hi)}]), against ±{100 * noise:.2g} % from the data's noise alone (the printed standard "
+            f"errors): laws that differ that much between the wells fit the wells' data, so treat the force "
+            f"between them, the saddle and the barriers as uncertain to that extent (the band is built to "
+            f"cover: on the built-in stress cases it is 6-60 x the actual error); the fit figure draws it; "
+            f"records that reach further from each well (larger or broadband excitation) narrow it"]
 
 
 def restoring_uncertainty(stiffness, covariance, x_lo: float, x_hi: float) -> float:
