@@ -17,7 +17,10 @@ def register(sub):
     p.add_argument("--out", required=True, help="output folder: report.json, augmented_model.json, summary.txt, figures")
     add_columns_option(p)
     p.add_argument("--form", choices=["auto", "strong", "weak"], default="auto",
-                   help="equation-error form (weak: test-function integrals, no acceleration; auto: weak when a is estimated)")
+                   help="equation-error form (weak: test-function integrals, no acceleration; auto: weak when a is estimated "
+                        "from a signal whose noise floor starts near its band edge, strong when a was recorded or the "
+                        "signal stands clear of its noise far above its band (noise-free x, an encoder); the report's "
+                        "settings.form_reason says which and why)")
     p.add_argument("--error", choices=["auto", "output", "equation"], default="auto",
                    help="holdout error: simulation (output) or equation error (auto: output when both models simulate)")
     p.add_argument("--decimate", type=int, default=1, help="strong form: low-pass and decimate the regression columns by this factor")
