@@ -148,18 +148,19 @@ def _longer_horizons(model, recs, windowed, given=None) -> tuple[list[dict], lis
             entry.update(given_nrmse=g_nrmse.tolist(), given_horizon_nrmse=None if g_h is None else g_h.tolist())
         out.append(entry)
         pct = lambda e: "a failed run" if not np.isfinite(e) else f"{100 * e:.3g} %"  # noqa: E731
-        if np.isfinite(before) and worst > max(WORSE_FACTOR * before, before + WORSE_MIN):
+        far = max(LONGER_FACTOR * ref, LONGER_MIN)
+        if worst > far or not np.isfinite(worst):  # far beyond the windows: something no coefficient covers
+            both = np.isfinite(before) and before > far
+            warn.append(f"{rec.name}: the refined model's output error {what} is {pct(worst)}, against "
+                        f"{100 * ref:.3g} % over the short windows, which restart from the recorded state: "
+                        + (f"the given model's is {pct(before)} too: the model lacks something no free coefficient "
+                           f"covers (a missing term: run gmr discover), or the record is too sensitive to follow (a "
+                           f"chaotic response: compare the models over short restarts, gmr simulate)" if both else
+                           "the model lacks something no free coefficient covers (a missing term: run gmr discover), "
+                           "or the windows are too short to show it (--window)"))
+        elif np.isfinite(before) and worst > max(WORSE_FACTOR * before, before + WORSE_MIN):
             warn.append(f"{rec.name}: the refined model's output error {what} is {pct(worst)}, the given model's "
                         f"{pct(before)}: refinement made the free run worse; keep the given model. The windows start "
                         f"from the recorded state, and a noisy one (x with noise, v estimated from it) moves the "
                         f"coefficients to absorb it: longer windows (--window), a recorded v or less noise reduce it")
-        elif worst > max(LONGER_FACTOR * ref, LONGER_MIN) or not np.isfinite(worst):
-            similar = np.isfinite(before) and before >= 0.8 * worst
-            warn.append(f"{rec.name}: the refined model's output error {what} is {pct(worst)}, against "
-                        f"{100 * ref:.3g} % over the short windows, which restart from the recorded state: "
-                        + (f"the given model's is {pct(before)} too: both lack something no free coefficient covers "
-                           f"(a missing term: run gmr discover), or the record is too sensitive to follow (a chaotic "
-                           f"response: compare the models over short restarts, gmr simulate)" if similar else
-                           "the model lacks something no free coefficient covers (a missing term: run gmr discover), "
-                           "or the windows are too short to show it (--window)"))
     return out, warn
