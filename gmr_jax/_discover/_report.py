@@ -71,8 +71,9 @@ def summary(report) -> str:
                      + " of them; candidates that stand in for each other in these data (longer or larger records "
                        f"separate them), none reported; the re-calibrated terms absorb it meanwhile; {err}.")
     if not report.findings and not big and not split:
-        lines.append(f"Nothing missing: no candidate physics passed the selection rule on any "
-                     f"{'cell' if report.given.topology.name == 'chain' else 'DOF'}; {err}.")
+        lines.append(f"Nothing missing that these data resolve: no candidate physics passed the selection rule on any "
+                     f"{'cell' if report.given.topology.name == 'chain' else 'DOF'} (an effect too small for this "
+                     f"noise, or one these records do not excite, would not show: it is not ruled out); {err}.")
     elif not report.findings and not split:  # the terms moved a lot: they may stand in for what the rule did not admit
         worst = max(big, key=lambda c: abs(c["coefficient"] / c["model_value"]))
         what = "mass" if worst["physics"] == "mass" else f"{worst['physics']} ({worst.get('family')} {worst.get('order')})"
