@@ -445,3 +445,34 @@ def test_cli_basins_notes_the_amplitudes_that_push_beyond_the_fitted_range(tmp_p
     path.write_text(json.dumps(doc))
     base = _beyond_data(chain, path, np.array([0.3, 0.5]), "base")  # cell 0 carries 1.5: A* = 0.385 / 1.5
     assert f"A > {a_star / 1.5:.4g} (2 of 2 amplitudes)" in base and "cell 0" in base
+
+
+def test_cli_basins_draws_maps_the_probability_over_the_covariance(tmp_path, capsys):
+    """`gmr basins --draws N`: N models drawn from the file's covariance swept like the model (basin_probability);
+    a tight covariance agrees with the model's own map, the probability file and figure are written; a model file
+    without a covariance is refused with the fix."""
+    import json
+
+    from gmr_jax._cli._main import main
+
+    terms = [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -1.0},
+             {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 1.0},
+             {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.3}]
+    doc = {"format": "gmr-model/1", "topology": "independent", "masses": [1.0], "terms": terms}
+    plain = tmp_path / "plain.json"
+    plain.write_text(json.dumps(doc))
+    doc["covariance"] = [{"dof": 0, "terms": [["stiffness", 1], ["stiffness", 3], ["velocity_damping", 1]],
+                          "matrix": (np.diag([1e-8, 1e-8, 1e-8])).tolist()}]
+    tight = tmp_path / "tight.json"
+    tight.write_text(json.dumps(doc))
+    args = ["--f", "0.05:0.5:3", "--A", "0.1:1.5:3", "--settle-time", "40", "--draws", "3"]
+    assert main(["basins", str(tight), *args, "--out", str(tmp_path / "b")]) == 0
+    printed = capsys.readouterr().out
+    assert "drawn models: 3 used of 3 drawn" in printed and "the model's own map is the most likely at 100 %" in printed
+    prob = np.load(tmp_path / "b" / "basins_probability.npz")
+    own = np.load(tmp_path / "b" / "basins.npz")
+    np.testing.assert_array_equal(prob["most_likely"], own["config"])
+    assert prob["probability"].shape[:2] == (3, 3) and np.allclose(prob["probability"].sum(-1), 1.0)
+    assert (tmp_path / "b" / "basins_confidence.png").stat().st_size > 1000
+    assert main(["basins", str(plain), *args, "--out", str(tmp_path / "c")]) == 2
+    assert "has no covariance" in capsys.readouterr().err

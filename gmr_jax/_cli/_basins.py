@@ -36,6 +36,10 @@ def register(sub):
                         "together (joint, member: default about 1280 / DOFs, 64-512)")
     b.add_argument("--cpu-devices", type=positive_int, default=None,
                    help="CPU cores to use (default: all; ignored on GPU/TPU)")
+    b.add_argument("--draws", type=int, default=0,
+                   help="also sweep this many models drawn from the model file's covariance (gmr.basin_probability): "
+                        "the probability of each final configuration per grid point, basins_probability.npz and "
+                        "basins_confidence.png (default 0: off; needs a fitted model's covariance)")
     b.add_argument("--out", required=True)
     b.set_defaults(fn=run)
     return b
@@ -59,6 +63,54 @@ def _compile_seconds() -> float:
         jax.monitoring.register_event_duration_secs_listener(listen)
         _COMPILE["listening"] = True
     return _COMPILE["seconds"] + BUILD_SECONDS[0]
+
+
+def _probability(gmr, model, args, f, A, x0, settings, out, wells) -> None:
+    """`--draws N`: the map over N models drawn from the file's covariance (`gmr.basin_probability`, wells searched
+    in the span of the model's own wells widened by half of it, as `find_wells` reads the data range), written to
+    basins_probability.npz and drawn (the probability of the most likely configuration) in basins_confidence.png."""
+    import jax
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .._errors import GMRInputError
+
+    if model.covariance is None:
+        raise GMRInputError(f"--draws: {args.model} has no covariance (a model written by gmr fit has one); "
+                            f"drop --draws to map the model itself")
+    lo, hi = np.nanmin(wells, axis=1), np.nanmax(wells, axis=1)
+    half = 0.5 * np.where(hi > lo, hi - lo, np.maximum(np.abs(hi), 1.0))
+    box = np.stack([lo - half, hi + half], 1)
+    stage(f"sweeping {args.draws} models drawn from the covariance")
+    sol = gmr.basin_probability(model, f, A, jax.random.key(0), args.draws, x_range=box, x0=x0, settings=settings,
+                                chunk=args.chunk)
+    bp, st = sol.value, sol.stats
+    if st["samples_used"] == 0:
+        print(f"gmr basins: warning: --draws: none of the {st['samples_drawn']} models drawn from the covariance has "
+              f"the model's wells and a dissipative damping ({st['samples_other_wells']} with other wells, "
+              f"{st['samples_non_dissipative']} feeding energy in): the covariance is too wide to map; no "
+              f"probability written")
+        return
+    conf = np.asarray(bp.confidence)
+    np.savez(out / "basins_probability.npz", f=f, A=A, configs=np.asarray(bp.configs),
+             probability=np.asarray(bp.probability), most_likely=np.asarray(bp.most_likely), confidence=conf,
+             mean_config=np.asarray(bp.mean_config))
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    im = ax.pcolormesh(f, A, conf, vmin=0.0, vmax=1.0, cmap="viridis", shading="nearest")
+    fig.colorbar(im, ax=ax, label="probability of the most likely configuration")
+    ax.set_xlabel("f (Hz)")
+    ax.set_ylabel("A")
+    ax.set_title(f"{Path(args.model).stem}: {st['samples_used']} models drawn from its covariance")
+    fig.savefig(out / "basins_confidence.png", dpi=100, bbox_inches="tight")
+    plt.close(fig)
+    agree = float(np.mean(np.asarray(bp.most_likely) == np.asarray(bp.mean_config)))
+    print(f"  drawn models: {st['samples_used']} used of {st['samples_drawn']} drawn ({st['samples_other_wells']} "
+          f"with other wells, {st['samples_non_dissipative']} whose damping feeds energy in); every one agrees at "
+          f"{100 * float(np.mean(conf == 1.0)):.3g} % of the points, the most likely configuration at least 90 % "
+          f"likely at {100 * float(np.mean(conf >= 0.9)):.3g} %; the model's own map is the most likely at "
+          f"{100 * agree:.3g} % (basins_probability.npz, basins_confidence.png)")
 
 
 def _beyond_data(model, model_path, A, load: str) -> str | None:
@@ -203,6 +255,8 @@ def run(args) -> int:
               f"of the settled-speed test (SweepSettings.sign_eps)")
     print(f"{n} points in {wall:.1f} s ({n / wall:.0f} trajectories/s, batching {sol.stats['batching']}); of which "
           f"compiling {comp:.1f} s" + ("" if comp > 0 else " (compiled programs loaded from the cache)"))
+    if args.draws:
+        _probability(gmr, model, args, f, A, x0, settings, out, wells)
     beyond = _beyond_data(model, args.model, A, args.load)
     if beyond:
         print(f"  note: {beyond}")
