@@ -55,8 +55,14 @@ def test_fit_hand_made_csv(joint_files, tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "estimated from x" in printed and "F_0(x, v)" in printed
     assert "no masses in the recordings and no --masses: taken as 1" in printed  # said, not silent
-    # the stored standard errors are printed, term by term, and agree with the file
-    assert "std. error" in printed
+    # the stored standard errors are printed, term by term, and agree with the file; the band the file's covariance
+    # gives the restoring force is printed beside them (the two differ: audit A read them as one)
+    assert "std. error" in printed and "from the data's noise" in printed
+    from gmr_jax._reconstruct._sanity import restoring_uncertainty
+
+    xs = np.concatenate([g.load_recording(f).x[:, 0] for f in joint_files])
+    band = restoring_uncertainty(k, np.asarray(m.covariance)[0], float(xs.min()), float(xs.max()))
+    assert f"the band on its restoring force ±{100 * band:.2g} %" in printed
     assert "What each well's data resolved" in printed and "resolution" in json.loads(out.read_text())
     x3 = next(t for t in json.loads(out.read_text())["terms"] if t["physics"] == "stiffness" and t["order"] == 3)
     row = next(line for line in printed.splitlines() if line.split()[:2] == ["x^3", "stiffness"])

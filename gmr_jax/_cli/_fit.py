@@ -170,11 +170,17 @@ def run(args) -> int:
     print(f"{st['method']} model from {len(recs)} recording(s) -> {args.out}")
     for line in _term_table(model, {"terms": model.terms()}, 4):  # equations, coefficients, std. errors
         print(line)
+    from .._reconstruct._sanity import restoring_uncertainty
+
     for i, rep in enumerate(st["dofs"]):
         if rep.equilibria.size:
+            xs = np.concatenate([r.x[:, i] for r in recs])
+            band = "" if model.covariance is None else (
+                f"; the band on its restoring force ±{100 * restoring_uncertainty(model.stiffness[i], model.covariance[i], float(xs.min()), float(xs.max())):.2g} %"  # noqa: E501
+                " (2 sd, RMS over the recorded range: the model file's covariance, the fit figure's band)")
             print(f"  DOF {i}: wells recorded about x = {np.round(rep.equilibria, 6).tolist()} (the records' means; "
                   f"the model's own equilibria: gmr show), global orders "
-                  f"K_r={rep.stats['K_r']}, K_d={rep.stats['K_d']}")
+                  f"K_r={rep.stats['K_r']}, K_d={rep.stats['K_d']}{band}")
     if model.n_dof > 1:
         print(f"  topology: {model.topology.name} (" + ("x_i is cell i's deformation, x_i - x_(i-1); "
               "--topology independent for separate masses)" if model.topology.name == "chain" else
