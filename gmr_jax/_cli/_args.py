@@ -126,6 +126,20 @@ def x_range(spec):
     return a, b
 
 
+def recorded_range(model_path, n_dof: int) -> np.ndarray | None:
+    """(n_dof, 2) the model file's `data_range` (each DOF's training displacement, written by `gmr fit`), or None
+    where the file has none (a hand-written model) or cannot be read as JSON."""
+    import json
+
+    if model_path is None:
+        return None
+    try:
+        rng = json.loads(Path(model_path).read_text()).get("data_range")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return None if rng is None else np.asarray(rng, float).reshape(n_dof, 2)
+
+
 def find_wells(model, spec, model_path=None):
     """Stable wells per DOF and a sentence saying where they came from.
 
@@ -134,8 +148,6 @@ def find_wells(model, spec, model_path=None):
     widened by half its width when present; otherwise an isolated outer root (farther from its
     neighbour than 10x the widest gap between the others) is dropped as a spurious outer well
     of the fitted polynomial and named."""
-    import json
-
     import gmr_jax as gmr
     from .._basins._wells import pad_wells, polynomial_wells
 
@@ -145,14 +157,8 @@ def find_wells(model, spec, model_path=None):
         wells = gmr.stable_wells(model, [[lo, hi]] * d)
         how = f"stable zeros in --x-range [{lo}, {hi}]"
     else:
-        box = None
-        if model_path is not None:
-            try:
-                box = json.loads(open(model_path).read()).get("data_range")
-            except (OSError, ValueError, AttributeError):
-                box = None
+        box = recorded_range(model_path, d)
         if box is not None:
-            box = np.asarray(box, float).reshape(d, 2)
             w = box[:, 1] - box[:, 0]
             box = np.stack([box[:, 0] - 0.5 * w, box[:, 1] + 0.5 * w], 1)
             roots = polynomial_wells(model, box)

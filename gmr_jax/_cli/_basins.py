@@ -5,7 +5,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._args import find_wells, grid, output_dir, positive_float, positive_int, start_configuration, tolerance
+from ._args import (find_wells, grid, output_dir, positive_float, positive_int, recorded_range, start_configuration,
+                    tolerance)
 from ._progress import stage
 
 
@@ -120,16 +121,10 @@ def _beyond_data(model, model_path, A, load: str) -> str | None:
     ones; base: A times the masses it carries). Above A* = the smallest such ratio no static equilibrium of
     the load lies in the range, so the trajectory leaves it and the map extrapolates the model (a bound:
     the dynamic overshoot leaves it at lower A too). A sentence, or None (no data range, or no A above A*)."""
-    import json
-
-    try:
-        rng = json.loads(open(model_path).read()).get("data_range")
-    except (OSError, ValueError, AttributeError):
-        rng = None
+    d = model.n_dof
+    rng = recorded_range(model_path, d)
     if rng is None or np.max(A) <= 0:
         return None
-    d = model.n_dof
-    rng = np.asarray(rng, float).reshape(d, 2)
     stiff = np.asarray(model.stiffness, float)
     masses = np.asarray(model.masses, float)
     if load == "base":

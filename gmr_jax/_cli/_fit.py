@@ -164,9 +164,10 @@ def run(args) -> int:
     routes = coordination_of(st)
     if routes:
         extra["coordination"] = routes
+    ranges = data_range(recs)  # the fitted region, written with the model and its band printed over it
     gmr.save_model(model, args.out, method=st["method"],
                    library={"r": lib.restoring_order, "d": lib.damping_order}, training=st["training"],
-                   warnings=load_warnings + list(st["warnings"]), data_range=data_range(recs), **extra)
+                   warnings=load_warnings + list(st["warnings"]), data_range=ranges, **extra)
     print(f"{st['method']} model from {len(recs)} recording(s) -> {args.out}")
     for line in _term_table(model, {"terms": model.terms()}, 4):  # equations, coefficients, std. errors
         print(line)
@@ -174,9 +175,9 @@ def run(args) -> int:
 
     for i, rep in enumerate(st["dofs"]):
         if rep.equilibria.size:
-            xs = np.concatenate([r.x[:, i] for r in recs])
             band = "" if model.covariance is None else (
-                f"; the band on its restoring force ±{100 * restoring_uncertainty(model.stiffness[i], model.covariance[i], float(xs.min()), float(xs.max())):.2g} %"  # noqa: E501
+                f"; the band on its restoring force "
+                f"±{100 * restoring_uncertainty(model.stiffness[i], model.covariance[i], *ranges[i]):.2g} %"
                 " (2 sd, RMS over the recorded range: the model file's covariance, the fit figure's band)")
             print(f"  DOF {i}: wells recorded about x = {np.round(rep.equilibria, 6).tolist()} (the records' means; "
                   f"the model's own equilibria: gmr show), global orders "

@@ -92,13 +92,12 @@ def run(args) -> int:
                               "model": [int(c) for c in fr.crossings[1]]})
     lines = _horizon_lines(fr)
     stage(f"writing {out}")
-    driven = rec.base_acc is not None or rec.force is not None  # else a free decay (`free_run` warned)
     free_run_figure(fr, out / "simulate.png", x_unit=args.x_unit,
-                    title=f"{args.model} on {rec.name}: " + ("free run under the recorded input" if driven
+                    title=f"{args.model} on {rec.name}: " + ("free run under the recorded input" if rec.driven
                                                              else "free decay (no input column)"))
     (out / "simulate.json").write_text(json.dumps(doc, indent=1) + "\n")
     md = [f"# gmr simulate: {args.model} on {args.recording}", "",
-          ("Free run under the recorded input" if driven else "Free decay (the recording has no input column)")
+          ("Free run under the recorded input" if rec.driven else "Free decay (the recording has no input column)")
           + " from the recorded state; NRMSE = ||x_model - x|| / ||x - mean(x)||.", "",
           *[f"**Warning.** {w}" for w in said], *([""] if said else []),
           "| DOF | NRMSE |", "|---|---|"] + [f"| {i} | {100 * e:.4g} % |" for i, e in enumerate(fr.nrmse)]

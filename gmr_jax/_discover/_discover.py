@@ -542,9 +542,7 @@ def discover(
              and "horizon_nrmse" in after)
     worse = (after["horizon_nrmse"] > before["horizon_nrmse"] * 1.05 if short else
              after["nrmse"] > before["nrmse"] * 1.05)
-    warns = [f"{r.name}: has no input column (base_acc or force), so it was taken as a free decay; if the "
-             f"structure was driven, add its input column (or map it: --columns base_acc=NAME)"
-             for r in list(recordings) + list(holdout or []) if r.base_acc is None and r.force is None]
+    warns = [r.free_decay_sentence("it was taken") for r in list(recordings) + list(holdout or []) if not r.driven]
     if worse:
         warns.append(
             f"the augmented model is worse than the given one on the {before['on']} ("
@@ -552,7 +550,7 @@ def discover(
                f" % -> {100 * after['horizon_nrmse']:.3g} %; the free runs leave it" if short else
                f"{kind} error NRMSE {100 * before['nrmse']:.3g} % -> {100 * after['nrmse']:.3g} %")
             + "): the data do not support "
-            f"its changes; keep the given model" + (" and treat the findings as unconfirmed" if findings else
+            "its changes; keep the given model" + (" and treat the findings as unconfirmed" if findings else
                                                     " (the re-calibration fitted the estimation data only)"))
     report = DiscoveryReport(findings, corrections, before, after, aug, model, location, selection,
                              settings, series, identifiability, warns)

@@ -21,6 +21,16 @@ def _range(vals) -> str:
     return lo if lo == hi else f"{lo}-{hi}"
 
 
+def _moved(c) -> bool:
+    """A re-calibration of a term the model has (nonzero) whose 95 % interval excludes 0."""
+    return c["model_value"] != 0 and not (c["ci95"][0] <= 0 <= c["ci95"][1])
+
+
+def _term(c) -> str:
+    """A correction's term in words: "mass", or "physics (family order)"."""
+    return "mass" if c["physics"] == "mass" else f"{c['physics']} ({c.get('family')} {c.get('order')})"
+
+
 def _split(report) -> list:
     """(dof, candidate, its forward step, its bootstrap share, {other candidate: share}) for each candidate the
     forward selection accepted that failed only the bootstrap stability, where it and the candidates selected
@@ -60,8 +70,8 @@ def summary(report) -> str:
             f"{100 * f['explained_fraction']:.0f} % of the model's equation-error residual on its own "
             f"(drop-one); {f['where']}; kept in {100 * f['stability']:.0f} % of bootstrap replicates, "
             f"p = {f['p_value']:.2g}, validation gain {100 * f['cv_gain']:.1f} %; {err}.")
-    big = [c for c in report.corrections if c["model_value"] != 0 and not (c["ci95"][0] <= 0 <= c["ci95"][1])
-           and abs(c["coefficient"]) > LARGE_CORRECTION * abs(c["model_value"])]
+    big = [c for c in report.corrections
+           if _moved(c) and abs(c["coefficient"]) > LARGE_CORRECTION * abs(c["model_value"])]
     split = _split(report)
     for dof, c, step, share, others in split:
         lines.append(f"A term is missing on {_cell(report, dof)}, but these data do not say which: {c} passed the "
@@ -76,7 +86,7 @@ def summary(report) -> str:
                      f"noise, or one these records do not excite, would not show: it is not ruled out); {err}.")
     elif not report.findings and not split:  # the terms moved a lot: they may stand in for what the rule did not admit
         worst = max(big, key=lambda c: abs(c["coefficient"] / c["model_value"]))
-        what = "mass" if worst["physics"] == "mass" else f"{worst['physics']} ({worst.get('family')} {worst.get('order')})"
+        what = _term(worst)
         held = sorted({r["physics"] for s in report.selection for r in s["rejected"]})
         lines.append(f"No new term passed the selection rule, but the model's own terms had to move: {what} by "
                      f"{100 * worst['coefficient'] / worst['model_value']:+.3g} % (more than "
@@ -87,9 +97,8 @@ def summary(report) -> str:
     for c in report.corrections:
         lo, hi = c["ci95"]
         mv = c["model_value"]
-        if mv != 0 and not (lo <= 0 <= hi):
-            what = "mass" if c["physics"] == "mass" else f"{c['physics']} ({c.get('family')} {c.get('order')})"
-            lines.append(f"  re-calibration, {_cell(report, c['dof'])}: {what} {_g(mv)} -> "
+        if _moved(c):
+            lines.append(f"  re-calibration, {_cell(report, c['dof'])}: {_term(c)} {_g(mv)} -> "
                          f"{_g(mv + c['coefficient'])} (correction {_g(c['coefficient'])}, 95 % CI "
                          f"{_g(lo)} to {_g(hi)})")
     integ = report.settings.get("integrated") or {}
@@ -107,14 +116,13 @@ def summary(report) -> str:
         lines.append(f"  {why}: a free run can leave a sensitive (chaotic) response even with an exact model, so the "
                      f"models are compared over runs of {b['horizon_s']:.3g} s from the recorded state: NRMSE "
                      f"{100 * b['horizon_nrmse']:.3g} % -> {100 * a['horizon_nrmse']:.3g} %")
-    shown = report.findings or any(c["model_value"] != 0 and not (c["ci95"][0] <= 0 <= c["ci95"][1])
-                                   for c in report.corrections)
-    if shown and report.settings.get("derivative_windows"):  # estimated derivatives: the intervals are the noise's
+    estimated = report.settings.get("derivative_windows")  # estimated derivatives: the intervals are the noise's
+    if estimated and (report.findings or any(_moved(c) for c in report.corrections)):
         lines.append("  the 95 % intervals are the noise's (block bootstrap); they leave out the bias that "
                      "derivatives estimated from a noisy signal give least squares (errors in variables): a "
-                     "correction of a few % whose interval excludes 0 can be that bias (or stand in for a term the rule did not "
-                     "admit), not a mis-calibration "
-                     "(the exact model on x-only records at 20 dB: linear stiffness and mass -1 to -2 %)")
+                     "correction of a few % whose interval excludes 0 can be that bias (or stand in for a term the "
+                     "rule did not admit), not a mis-calibration (the exact model on x-only records at 20 dB: linear "
+                     "stiffness and mass -1 to -2 %)")
     if b["kind"] == "equation" and b.get("why_not_output"):
         lines.append(f"  error measure: equation (force) error, not simulation (output) error: {b['why_not_output']}")
     for w in report.warnings:

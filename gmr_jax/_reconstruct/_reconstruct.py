@@ -128,7 +128,7 @@ def _resolve(recordings, masses, topology, min_recordings=2, what="fit", exclude
         )
     for r in recs:
         warnings += _sanity.check_clipping(r.name, _measured_columns(r))
-        warnings += _sanity.check_missing_input(r.name, r.x, r.base_acc is not None or r.force is not None)
+        warnings += _sanity.check_missing_input(r.name, r.x, r.driven)
         warnings += _sanity.check_units(r.name, r, topology)
     recs = [r.complete(topology, exclude_center=exclude_center) for r in recs]  # True: x'' leaves out x(t)
     return recs, masses, topology, warnings

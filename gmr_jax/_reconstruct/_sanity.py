@@ -251,8 +251,7 @@ def check_units(name: str, rec, topology) -> list[str]:
     pairs = []
     if rec.v is not None and "v" not in rec.derived and info.get("from") != "v":
         pairs.append(("v", 1, np.asarray(rec.v, float)))
-    has_input = rec.base_acc is not None or rec.force is not None
-    if rec.a is not None and "a" not in rec.derived and info.get("from") != "a" and has_input:
+    if rec.a is not None and "a" not in rec.derived and info.get("from") != "a" and rec.driven:
         b = np.zeros(x.shape[0]) if rec.base_acc is None else np.asarray(rec.base_acc, float)
         rel = np.asarray(rec.a, float) - b[:, None]
         if topology.name == "chain":

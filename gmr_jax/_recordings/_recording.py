@@ -104,6 +104,17 @@ class Recording:
         object.__setattr__(self, "integration", info)
 
     @property
+    def driven(self) -> bool:
+        """True when an input was recorded (base_acc or force); False: a free decay, or an input column left out."""
+        return self.base_acc is not None or self.force is not None
+
+    def free_decay_sentence(self, taken: str) -> str:
+        """What a user is told where a record without an input column is `taken` ("the model is run", ...) as
+        a free decay: it may be a driven record whose input column was left out."""
+        return (f"{self.name}: has no input column (base_acc or force), so {taken} as a free decay; if the structure "
+                f"was driven, add its input column (or map it: --columns base_acc=NAME)")
+
+    @property
     def equilibrium_observed(self) -> bool:
         """False when x was integrated from v or a and no `equilibrium` was given."""
         return "x" not in self.derived or self.equilibrium is not None
@@ -407,6 +418,8 @@ def save_recording(rec: Recording, path) -> None:
     np.savez(path, **data)
 
 
+#: the CSV columns numbered per DOF (x0, v0, ..., m0, equilibrium0)
+_NUMBERED = ("x", "v", "a", "f", "m", "equilibrium")
 #: CSV headers of a one-DOF recording read as the numbered columns (an extension of the contract's
 #: t, x0.., v0.., a0.., f0..: the names lab files and the NPZ keys use)
 _CSV_ALIASES = {"x": "x0", "v": "v0", "a": "a0", "f": "f0", "force": "f0", "equilibrium": "equilibrium0",
@@ -443,7 +456,7 @@ def _read_csv(path: Path, src: str, raw: bool = False):
     def known(h):
         if h in ("t", "base_acc"):
             return True
-        return any(h.startswith(p) and h[len(p):].isdigit() for p in ("x", "v", "a", "f", "m", "equilibrium"))
+        return any(h.startswith(p) and h[len(p):].isdigit() for p in _NUMBERED)
 
     unknown = [] if raw else [h for h in header if not known(h)]
     if unknown or (not raw and ("t" not in header or not {"x0", "v0", "a0"} & set(header))):
@@ -527,7 +540,8 @@ def _standard_names(header, src):
         name, unit = (m.group(1).strip(), m.group(2).strip()) if m else (h, None)
         low = name.lower()
         low = "t" if low == "time" else low
-        if low == "t" or low == "base_acc" or _CSV_ALIASES.get(low) or re.fullmatch(r"(x|v|a|f|m|equilibrium)\d+", low):
+        numbered = re.fullmatch(f"({'|'.join(_NUMBERED)})\\d+", low)
+        if low == "t" or low == "base_acc" or _CSV_ALIASES.get(low) or numbered:
             name = low
         name = _CSV_ALIASES.get(name, name)
         if name == "t" and unit is not None:

@@ -90,11 +90,9 @@ def free_run(model: AbstractMechanicalModel, recording, *, columns: dict | None 
     if rec.n_dof != model.n_dof:
         raise GMRInputError(f"free_run: {rec.name} has {rec.n_dof} DOF(s), the model {model.n_dof}")
     rec = rec.complete(model.topology.name)
-    if rec.base_acc is None and rec.force is None:  # the contract's free decay, or an input column left out
+    if not rec.driven:  # the contract's free decay, or an input column left out
         notes = ["no input column (base_acc or force): simulated as a free decay from the first state"]
-        warnings.warn(f"{rec.name}: has no input column (base_acc or force), so the model is run as a free decay; if "
-                      f"the structure was driven, add its input column (or map it: --columns base_acc=NAME)",
-                      GMRDataWarning, stacklevel=2)
+        warnings.warn(rec.free_decay_sentence("the model is run"), GMRDataWarning, stacklevel=2)
     else:
         notes = ["input low-passed at 3x its band edge, cubic-spline interpolated"]
     if not rec.equilibrium_observed:
