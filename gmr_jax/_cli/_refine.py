@@ -23,10 +23,16 @@ def register(sub):
     r.add_argument("--max-iterations", "--max-steps", dest="max_iterations", type=int, default=50,
                    help="least-squares solver iterations (default 50)")
     r.add_argument("--stride", type=int, default=1, help="use every STRIDE-th sample in the residuals")
+    r.add_argument("--starts", choices=["estimated", "measured"], default="estimated",
+                   help="each window's start state: fitted to the window's x (default; a noisy x or a v "
+                   "estimated from it does not bend the coefficients) or the recorded one (cheaper)")
     r.add_argument("--max-windows", type=int, default=None, help="at most this many windows per recording")
     r.add_argument("--solver", choices=["lm", "gauss-newton"], default="lm")
     r.set_defaults(fn=run)
     return r
+
+
+_FROM = {"measured": "the recorded state", "estimated": "start states fitted to each window"}
 
 
 def run(args) -> int:
@@ -49,7 +55,7 @@ def run(args) -> int:
     solver = (optx.LevenbergMarquardt(rtol=1e-6, atol=1e-8) if args.solver == "lm"
               else optx.GaussNewton(rtol=1e-6, atol=1e-8))
     settings = gmr.RefineSettings(window=args.window, solver=solver, max_iterations=args.max_iterations,
-                                  stride=args.stride, max_windows=args.max_windows)
+                                  stride=args.stride, max_windows=args.max_windows, starts=args.starts)
     stage("refining: multiple-shooting least squares (compiles the windowed solves first)")
     with warnings.catch_warnings():  # printed below as `warning:` lines
         warnings.simplefilter("ignore", gmr.GMRDataWarning)
@@ -65,12 +71,13 @@ def run(args) -> int:
     for name in ("train", "holdout"):
         e = st[name]
         if e is not None:
-            print(f"  {name} NRMSE over {args.window:g} s windows from the recorded state: {e['before'].nrmse:.4g} -> "
+            print(f"  {name} NRMSE over {args.window:g} s windows from {_FROM[args.starts]}: {e['before'].nrmse:.4g} -> "
                   f"{e['after'].nrmse:.4g} (failed windows {e['before'].failed} -> {e['after'].failed} of "
                   f"{e['after'].windows})")
     if sol.result in (RESULTS.successful, RESULTS.nonlinear_max_steps_reached):
         stage("checking the refined model over longer horizons (free runs)")
-        longer, warn = _longer_horizons(sol.value, hold or train[:1], st["holdout" if hold else "train"], given=model)
+        longer, warn = _longer_horizons(sol.value, hold or train[:1], st["holdout" if hold else "train"], given=model,
+                                        starts=args.starts)
         report["free_run"] = longer
         st["warnings"] = list(st["warnings"]) + warn
         report["warnings"] = list(st["warnings"])
@@ -113,14 +120,14 @@ def _pct(a) -> str:
 WORSE_FACTOR, WORSE_MIN = 1.1, 0.005
 
 
-def _longer_horizons(model, recs, windowed, given=None) -> tuple[list[dict], list[str]]:
+def _longer_horizons(model, recs, windowed, given=None, starts="estimated") -> tuple[list[dict], list[str]]:
     """Free runs of the refined model, and of the `given` one, on `recs` (`gmr.free_run`: the whole record, and
     restarts every input period where x was measured): the multiple-shooting windows restart from the recorded
     state, so a model that lacks a term (no damping at all, free coefficients that cannot stand in for it) can fit
     them and still leave the record within a period (hand-made Duffing without its damping term: windowed NRMSE
-    2.6 %, free run 826 %); and windows that start from a noisy state can move exact coefficients (hand-made Duffing,
-    x only, 30 dB: k3 300 -> 289, free run 3.2 -> 5.0 %, windowed error up 4.6 %, no warning): the refined model's
-    free run worse than the given model's is reported."""
+    2.6 %, free run 826 %); and windows that start from a noisy recorded state (`--starts measured`) can move exact
+    coefficients (hand-made Duffing, x only, 30 dB: k3 300 -> 289, free run 3.2 -> 5.0 %, windowed error up 4.6 %,
+    no warning): the refined model's free run worse than the given model's is reported."""
     from .._simulate._free_run import free_run
 
     def measure(m, rec):
@@ -152,7 +159,7 @@ def _longer_horizons(model, recs, windowed, given=None) -> tuple[list[dict], lis
         if worst > far or not np.isfinite(worst):  # far beyond the windows: something no coefficient covers
             both = np.isfinite(before) and before > far
             warn.append(f"{rec.name}: the refined model's output error {what} is {pct(worst)}, against "
-                        f"{100 * ref:.3g} % over the short windows, which restart from the recorded state: "
+                        f"{100 * ref:.3g} % over the short windows, which restart at every window: "
                         + (f"the given model's is {pct(before)} too: the model lacks something no free coefficient "
                            f"covers (a missing term: run gmr discover), or the record is too sensitive to follow (a "
                            f"chaotic response: compare the models over short restarts, gmr simulate)" if both else
@@ -160,7 +167,11 @@ def _longer_horizons(model, recs, windowed, given=None) -> tuple[list[dict], lis
                            "or the windows are too short to show it (--window)"))
         elif np.isfinite(before) and worst > max(WORSE_FACTOR * before, before + WORSE_MIN):
             warn.append(f"{rec.name}: the refined model's output error {what} is {pct(worst)}, the given model's "
-                        f"{pct(before)}: refinement made the free run worse; keep the given model. The windows start "
-                        f"from the recorded state, and a noisy one (x with noise, v estimated from it) moves the "
-                        f"coefficients to absorb it: longer windows (--window), a recorded v or less noise reduce it")
+                        f"{pct(before)}: refinement made the free run worse; keep the given model. " + (
+                            "The windows start from the recorded state, and a noisy one (x with noise, v estimated "
+                            "from it) moves the coefficients to absorb it: the default --starts estimated fits "
+                            "each window's start instead" if starts == "measured" else
+                            "The training windows do not show what the free run does (records of the wells only, "
+                            "for a law used between them): refine on records that cover the motion, or fewer "
+                            "free coefficients (--free damping)"))
     return out, warn

@@ -17,13 +17,10 @@ from .._solution import RESULTS, Solution, code_name, raise_if_failed
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING
 from .._model._model import GlobalModel
 from .._simulate._integrate import Integrator
-from ._shooting import OutputError, Windows, make_windows, output_error, prepare, simulate_windows
+from ._shooting import (FAILED_WINDOW_RESIDUAL, OutputError, Windows, check_starts, fit_starts, make_windows,
+                        measured_starts, output_error, prepare, window_residuals)
 
 PHYSICS = (STIFFNESS, VELOCITY_DAMPING, POSITION_DAMPING)
-#: Residual (in units of the DOF's standard deviation) given to every sample of a window whose
-#: simulation failed or left the divergence box: large, constant, with zero derivative, so that
-#: a step into divergence is rejected by the trust region instead of producing NaN gradients.
-FAILED_WINDOW_RESIDUAL = 10.0
 
 
 class RefineSettings(eqx.Module):
@@ -31,8 +28,13 @@ class RefineSettings(eqx.Module):
 
     **Attributes:**
 
-    - `window`: shooting window length in seconds; every window starts from the measured (x, v)
-      at its first sample (v estimated from x when not recorded).
+    - `window`: shooting window length in seconds.
+    - `starts`: what each window starts from. "estimated" (default): the state (x0, v0) that fits
+      the window's measured x best under the current coefficients (`fit_starts`; the
+      coefficients' Jacobian is projected off the start states', variable projection); a noisy
+      x0, or a v0 estimated from a noisy x, no longer bends the coefficients. "measured": the
+      recorded (x, v) at its first sample (v estimated from x when not recorded); cheaper, and
+      as good where x and v are clean.
     - `solver`: an optimistix least-squares solver (Levenberg-Marquardt by default; e.g.
       `optx.GaussNewton(rtol, atol)` also works).
     - `max_iterations`: maximum least-squares solver iterations (optimistix's `max_steps`).
@@ -51,6 +53,7 @@ class RefineSettings(eqx.Module):
     """
 
     window: float = 1.0
+    starts: str = eqx.field(static=True, default="estimated")
     solver: optx.AbstractLeastSquaresSolver = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-8)
     max_iterations: int = eqx.field(static=True, default=50)
     stride: int = eqx.field(static=True, default=1)
@@ -61,6 +64,7 @@ class RefineSettings(eqx.Module):
     box_ranges: float = 10.0
 
     def __check_init__(self):
+        check_starts(self.starts)
         if self.jac not in ("fwd", "bwd"):
             raise GMRInputError(f"jac must be 'fwd' or 'bwd', got {self.jac!r}")
         if self.window is not None and not (np.isfinite(self.window) and self.window > 0):
@@ -138,6 +142,7 @@ class ShootingProblem(eqx.Module):
     stride: int = eqx.field(static=True)
     jac: str = eqx.field(static=True)
     integrator: Integrator
+    estimated: bool = eqx.field(static=True, default=False)
 
     def to_model(self, p: Float[Array, " free"]) -> GlobalModel:
         coef = p * self.scales
@@ -150,34 +155,51 @@ class ShootingProblem(eqx.Module):
             start += n
         return model
 
+    def starts(self, p, w: Windows):
+        """Each window's start state (W, 2D) under the coefficients `p` (no gradient flows through it)."""
+        if not self.estimated:
+            return measured_starts(w)
+        return fit_starts(self.to_model(jax.lax.stop_gradient(p)), w, self.stride, self.integrator,
+                          FAILED_WINDOW_RESIDUAL)
+
     def _window_residuals(self, p, w: Windows, adjoint):
-        xs, codes = simulate_windows(self.to_model(p), w, self.stride, self.integrator, adjoint)
-        ok = codes == RESULTS.successful._value
-        e = (xs - w.x[:, self.stride::self.stride]) / w.scale[:, None, :]
-        e = jnp.where(ok[:, None, None], e, FAILED_WINDOW_RESIDUAL)
-        return e.reshape(e.shape[0], -1), ok
+        return window_residuals(self.to_model(p), w, self.starts(p, w), self.stride, self.integrator, adjoint,
+                                FAILED_WINDOW_RESIDUAL)
 
     def residuals(self, p, windows: list[Windows], adjoint=dfx.RecursiveCheckpointAdjoint()):
-        """All residuals (flat) and the per-window success flags."""
+        """All residuals (flat) and the per-window success flags. With estimated starts these are
+        at the best start states for `p`, held fixed under differentiation: the gradient of the
+        squared norm is then exact (the starts are stationary), the Jacobian is not (that is
+        `residuals_and_jacobian`'s projected one)."""
         parts = [self._window_residuals(p, w, adjoint) for w in windows]
         return jnp.concatenate([r.reshape(-1) for r, _ in parts]), jnp.concatenate([ok for _, ok in parts])
 
     def residuals_and_jacobian(self, p, windows: list[Windows]):
-        """Residuals (R,) and their Jacobian (R, free), window by window."""
+        """Residuals (R,) and their Jacobian (R, free), window by window. With estimated starts the
+        Jacobian is the variable-projection one (Kaufman): each window's coefficient Jacobian with
+        its start-state columns projected out, J_p - J_s J_s^+ J_p, the derivative of the
+        residuals at starts re-fitted to every p (to first order in the residual)."""
         rs, js = [], []
+        if self.jac == "fwd":
+            adj, jfn = dfx.ForwardMode(), jax.jacfwd
+        else:
+            adj, jfn = dfx.RecursiveCheckpointAdjoint(), jax.jacrev
         for w in windows:
-            if self.jac == "fwd":
-                adj = dfx.ForwardMode()
-                jfn = jax.jacfwd
-            else:
-                adj = dfx.RecursiveCheckpointAdjoint()
-                jfn = jax.jacrev
+            starts = self.starts(p, w)
 
-            def one(q, wi, adj=adj):
-                r, _ = self._window_residuals(q, jax.tree_util.tree_map(lambda a: a[None], wi), adj)
+            def one(z, wi, adj=adj):
+                q, s = z
+                r, _ = window_residuals(self.to_model(q), jax.tree_util.tree_map(lambda a: a[None], wi), s[None],
+                                        self.stride, self.integrator, adj, FAILED_WINDOW_RESIDUAL)
                 return r[0], r[0]
 
-            j, r = jax.vmap(lambda wi: jfn(one, has_aux=True)(p, wi))(w)
+            def window(wi, s):
+                (jp, jst), r = jfn(one, has_aux=True)((p, s), wi)
+                if self.estimated:
+                    jp = jp - jst @ jnp.linalg.lstsq(jst, jp)[0]
+                return jp, r
+
+            j, r = jax.vmap(window)(w, starts)
             rs.append(r.reshape(-1))
             js.append(j.reshape(-1, p.shape[0]))
         return jnp.concatenate(rs), jnp.concatenate(js)
@@ -221,7 +243,8 @@ def shooting_problem(
     if _uses_sign(model, mask):
         v_rms = float(np.sqrt(np.mean(np.concatenate([np.asarray(r.v).ravel() ** 2 for r in recs]))))
         m = m.with_sign_eps(settings.sign_eps * max(v_rms, 1e-300))
-    problem = ShootingProblem(m, jnp.asarray(scales), tuple(index), settings.stride, settings.jac, settings.integrator)
+    problem = ShootingProblem(m, jnp.asarray(scales), tuple(index), settings.stride, settings.jac, settings.integrator,
+                              settings.starts == "estimated")
     # p = coefficient / scale: the sign of each nonzero start, 0 for a zero start
     signs = np.concatenate([np.sign(np.asarray(getattr(model, ph))[np.asarray(r, int), np.asarray(c, int)])
                             if len(r) else np.zeros(0) for ph, (r, c) in zip(PHYSICS, index)])
@@ -295,7 +318,8 @@ def refine(
         result = RESULTS.diverged
 
     def errs(recs):
-        kw = dict(integrator=settings.integrator, box_ranges=settings.box_ranges, max_windows=settings.max_windows)
+        kw = dict(integrator=settings.integrator, box_ranges=settings.box_ranges, max_windows=settings.max_windows,
+                  starts=settings.starts)
         return {"before": output_error(exact0, recs, settings.window, **kw).value,
                 "after": output_error(refined, recs, settings.window, **kw).value}
 
