@@ -50,6 +50,10 @@ class RESULTS(dfx.RESULTS):
         "The optimized actuation did not reach the target in the verifying simulation with the "
         "exact model (it lies on a basin boundary that the verification resolves differently)."
     )
+    unordered_times = (
+        "The save times are not strictly increasing and finite (a reversed or repeated time, or "
+        "NaN, passed under jit where it cannot be refused): give ts in increasing order."
+    )
 
 
 def _value(code) -> int:

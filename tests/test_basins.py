@@ -476,3 +476,58 @@ def test_cli_basins_draws_maps_the_probability_over_the_covariance(tmp_path, cap
     assert (tmp_path / "b" / "basins_confidence.png").stat().st_size > 1000
     assert main(["basins", str(plain), *args, "--out", str(tmp_path / "c")]) == 2
     assert "has no covariance" in capsys.readouterr().err
+
+
+def test_a_third_well_is_its_own_configuration(tmp_path):
+    """A tri-stable DOF (F = x^5 - 5x^3 + 4x: wells -2, 0, 2): a point that ends in the third well has
+    configuration 2, not the first well's 0 (audit: `config` was a bit field, and the +2 well's points
+    were drawn and labelled as the -2 well's); codes are base-K digits (K wells per cell), a bit field
+    for bistable cells, and the figure reads them in the base its wells give."""
+    from gmr_jax._basins._sweep import classify
+    from gmr_jax.plots import basin_figure, config_label
+
+    settings = SweepSettings()
+    wells = jnp.array([[-2.0, 0.0, 2.0]])
+    ok = g.RESULTS.successful._value
+    for x, idx in ((-2.0, 0), (0.0, 1), (2.0, 2)):
+        i, config, _ = classify(jnp.array([x]), jnp.zeros(1), ok, wells, jnp.array([4.0]), settings)
+        assert int(i[0]) == idx and int(config) == idx
+    two = jnp.array([[-2.0, 0.0, 2.0], [-1.0, 1.0, jnp.nan]])
+    _, config, _ = classify(jnp.array([2.0, 1.0]), jnp.zeros(2), ok, two, jnp.array([4.0, 2.0]), settings)
+    assert int(config) == 2 + 1 * 3 and config_label(int(config), 2, 3) == "2-1"
+    _, bits, _ = classify(jnp.array([1.0, 1.0]), jnp.zeros(2), ok, jnp.array([[-1.0, 1.0], [-1.0, 1.0]]),
+                          jnp.array([2.0, 2.0]), settings)
+    assert int(bits) == 3 and config_label(3, 2) == "1-1"  # bistable cells: the bit field, as before
+    model = g.from_terms([1.0], [{"dof": 0, "physics": "stiffness", "order": k, "coefficient": c}
+                                 for k, c in ((1, 4.0), (3, -5.0), (5, 1.0))]
+                         + [{"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.5}])
+    found = stable_wells(model, [(-3.0, 3.0)])
+    np.testing.assert_allclose(np.asarray(found)[0][np.isfinite(np.asarray(found)[0])], [-2.0, 0.0, 2.0], atol=1e-9)
+    config = np.array([[0, 1], [2, -1]])
+    fig = basin_figure(np.array([1.0, 2.0]), np.array([1.0, 2.0]), config, 1, wells=found)
+    labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert "2 (x = 2)" in labels and "0 (x = -2)" in labels
+    with pytest.raises(g.GMRInputError, match="more than two wells"):
+        basin_figure(np.array([1.0, 2.0]), np.array([1.0, 2.0]), config, 1)
+
+
+def test_cli_basins_notes_crossings_faster_than_the_recorded_speeds(tmp_path):
+    """A crossing of the double well F = -x + x^3 (barrier 1/4, mass 1) needs |v| >= sqrt(1/2): a model fitted
+    at speeds up to 0.05 (the file's speed_range) is noted (its damping along the crossings is extrapolated), one
+    fitted up to 1 is not, nor a file without speed_range."""
+    import json
+
+    from gmr_jax._cli._basins import _beyond_speed
+
+    model = g.from_terms([1.0], [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -1.0},
+                                 {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 1.0},
+                                 {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.1}])
+    wells = np.array([[-1.0, 1.0]])
+    for vmax, noted in ((0.05, True), (1.0, False), (None, False)):
+        path = tmp_path / f"m{vmax}.json"
+        g.save_model(model, path, **({} if vmax is None else {"speed_range": [[-vmax, vmax]]}))
+        note = _beyond_speed(model, path, wells, None)
+        assert (note is not None) == noted, note
+        if noted:
+            assert "at least 0.707" in note and "14.1 x the fastest recorded (0.05" in note
+    assert json.loads(path.read_text()).get("speed_range") is None

@@ -80,6 +80,10 @@ def test_fit_hand_made_csv(joint_files, tmp_path, capsys):
     # the region the model was fitted on, per DOF (where basins/actuate look for wells)
     x = np.concatenate([np.loadtxt(p, delimiter=",", skiprows=1)[:, 1] for p in joint_files])
     np.testing.assert_allclose(written["data_range"], [[x.min(), x.max()]])
+    # and the speeds its damping law was fitted at (x only here: its central difference)
+    data = [np.loadtxt(p, delimiter=",", skiprows=1) for p in joint_files]
+    v = np.concatenate([np.gradient(d[:, 1], d[1, 0] - d[0, 0]) for d in data])
+    np.testing.assert_allclose(written["speed_range"], [[v.min(), v.max()]], rtol=1e-6)
 
 
 def test_fit_corrects_for_the_noise_on_a_measured_x(tmp_path, capsys):

@@ -76,3 +76,28 @@ def test_version(capsys):
     assert capsys.readouterr().out.strip() == f"gmr_jax {g.__version__}"
     assert gmr_launch.main(["--version"]) == 0  # the console script answers without importing gmr_jax
     assert capsys.readouterr().out.strip() == f"gmr_jax {g.__version__}"
+
+
+def test_show_gives_the_barriers_an_interval_from_the_covariance(tmp_path, capsys):
+    """With a covariance in the file, each barrier and saddle gets the 95 % range over models drawn from it,
+    checked against the linear propagation of the same covariance (barrier k1^2 / (4 k3) of F = k1 x + k3 x^3,
+    the saddle at 0); without one, `gmr show` says the numbers carry no interval."""
+    from gmr_jax._cli._show import barrier_intervals, barriers, equilibria
+
+    k1, k3, s1, s3 = -2.0, 8.0, 0.02, 0.1
+    cov = [{"dof": 0, "terms": [["stiffness", 1], ["stiffness", 3]], "matrix": [[s1**2, 0.0], [0.0, s3**2]]}]
+    model = g.from_terms([1.0], [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": k1},
+                                 {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": k3}], covariance=cov)
+    bars = barriers(model.stiffness, equilibria(model.stiffness))
+    s = barrier_intervals(model, bars, n=4000)[0][0]
+    sd = np.hypot(2 * k1 / (4 * k3) * s1, k1**2 / (4 * k3**2) * s3)  # d(k1^2/4k3)
+    np.testing.assert_allclose(s["from_left"], 0.125 + 1.96 * sd * np.array([-1, 1]), rtol=0.03)
+    assert s["kept"] == 1.0 and abs(s["saddle"][0]) < 1e-12 and abs(s["saddle"][1]) < 1e-12
+    g.save_model(model, tmp_path / "m.json")
+    assert main(["show", str(tmp_path / "m.json")]) == 0
+    assert "95 % of the models drawn from the file's covariance: saddle" in capsys.readouterr().out
+    g.save_model(g.from_terms([1.0], [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": k1},
+                                      {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": k3}]),
+                 tmp_path / "n.json")
+    assert main(["show", str(tmp_path / "n.json")]) == 0
+    assert "no covariance in this file: no interval" in capsys.readouterr().out

@@ -442,6 +442,13 @@ def test_acceleration_only_chain_becomes_cell_deformations(rng):
     np.testing.assert_allclose(ind.x, rec.x)
     # idempotent: completing twice does not difference twice
     np.testing.assert_allclose(chain.complete("chain").x, chain.x)
+    # the equilibrium is each cell's rest deformation (formats.md), for a chain as for one DOF (audit: cell 1's
+    # was read as mass 1's position, its wells moved by cell 0's rest deformation)
+    eq = np.array([-0.8, 1.2])
+    placed = g.Recording(t=t, a=np.stack([a0, a1], 1), force=np.zeros((t.size, 2)), equilibrium=eq)
+    np.testing.assert_allclose(placed.complete("chain").x.mean(0), eq, atol=1e-9)
+    np.testing.assert_allclose(placed.complete("chain").x - eq, chain.x, atol=1e-12)
+    np.testing.assert_allclose(placed.complete("independent").x.mean(0), eq, atol=1e-9)
 
 
 def test_csv_separated_by_semicolons_or_tabs(tmp_path):
@@ -516,6 +523,41 @@ def test_lab_csv_headers_units_case_time_and_equilibrium(tmp_path):
     np.savetxt(tmp_path / "nohdr.csv", np.column_stack([t, x]), delimiter=",")
     with pytest.raises(g.GMRInputError, match="the first line holds numbers .* not column names"):
         g.load_recording(tmp_path / "nohdr.csv")
+
+
+def test_labelled_units_are_made_coherent(tmp_path):
+    """A unit in a header is applied, not dropped (audit: an accelerometer file 'a0 [g]' was read as m/s^2, the
+    barriers 75 % off, and nothing said so): g becomes the file's length unit per s^2, lengths follow the first
+    labelled one (x [mm] with a [m/s^2]: a in mm/s^2), SI throughout where a force or mass is labelled; an unknown
+    unit, or lengths beside angles, are refused with the fix; an unlabelled column is taken as it is."""
+    t = np.arange(0.0, 2.0, 1e-3)
+    a, b = np.sin(5 * t), 0.3 * np.cos(3 * t)
+
+    def read(header, *cols):
+        np.savetxt(tmp_path / "u.csv", np.column_stack([t, *cols]), delimiter=",", header=header, comments="")
+        return g.load_recording(tmp_path / "u.csv")
+
+    r = read("t,a0 [g],base_acc [g],equilibrium [m]", a, b, np.full_like(t, 0.5))
+    np.testing.assert_allclose(r.a[:, 0], 9.80665 * a)
+    np.testing.assert_allclose(r.base_acc, 9.80665 * b)
+    assert r.equilibrium.tolist() == [0.5]
+    r = read("t,a0 [m/s^2],base_acc,equilibrium [mm]", a, b, np.full_like(t, 12.0))  # the first label is m
+    np.testing.assert_allclose(r.a[:, 0], a)
+    np.testing.assert_allclose(r.base_acc, b)  # unlabelled: as it is
+    np.testing.assert_allclose(r.equilibrium, [0.012])
+    r = read("t,x [mm],v [mm/s],a [m/s²],base_acc [g]", a, a, a, b)
+    np.testing.assert_allclose(r.x[:, 0], a)
+    np.testing.assert_allclose(r.a[:, 0], 1e3 * a)
+    np.testing.assert_allclose(r.base_acc, 9806.65 * b)
+    r = read("t,x [mm],f [kN],m [g]", a, b, np.full_like(t, 500.0))
+    np.testing.assert_allclose(r.x[:, 0], 1e-3 * a)
+    np.testing.assert_allclose(r.force[:, 0], 1e3 * b)
+    assert r.masses.tolist() == [0.5]
+    with pytest.raises(g.GMRInputError, match="the unit 'V' of column 'a0' is not one gmr_jax converts.*leave the "
+                                              "unit out"):
+        read("t,x,a [V]", a, a)
+    with pytest.raises(g.GMRInputError, match="mixes lengths and angles"):
+        read("t,x [deg],v [m/s]", a, a)
 
 
 def test_dead_channels_and_repeated_time_stamps_are_named(tmp_path):

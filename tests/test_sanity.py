@@ -125,6 +125,24 @@ def test_3_clipped_channel(nes):
     assert not _has(msgs, "column x0 looks clipped", "nes_S2")
 
 
+def test_3_brief_saturations_are_found_by_their_rail():
+    """A noisy response clipped at its 99.9 % quantile sits at the rail for 1-2 samples per peak (no flat tops of
+    3): flagged; a noise-free sine that repeats its samples every period, a quantised (encoder-like) record and a
+    clean noisy one are not."""
+    rng = np.random.default_rng(0)
+    t = np.arange(60_000) / 200.0
+    y = np.sin(2 * np.pi * 10.3 * t) * (1 + 0.3 * np.sin(0.2 * t)) + 0.01 * rng.standard_normal(t.size)
+    rail = np.quantile(y, 0.999)
+    clipped = np.minimum(y, rail)
+    assert _sanity._flat_samples(clipped >= rail, 3) < 5  # the old rule's flat tops: none
+    msgs = _sanity.check_clipping("rec", {"a0": clipped})
+    assert len(msgs) == 1 and "column a0 looks clipped: 60 samples" in msgs[0] and "maximum" in msgs[0]
+    sine = np.sin(2 * np.pi * 10.0 * np.arange(60_000) / 200.0)  # 20 samples a period: its top repeats
+    quantised = np.round(y * 200) / 200
+    for col in (y, sine, quantised):
+        assert _sanity.check_clipping("rec", {"a0": col}) == []
+
+
 def test_4_driven_record_without_input(nes):
     _, recs = nes
     _, msgs = _fit([dataclasses.replace(recs[0], base_acc=None), *recs[1:]])

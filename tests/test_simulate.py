@@ -29,6 +29,19 @@ def test_matches_scipy_and_jit_vmap():
     np.testing.assert_allclose(batch.value[0][0], sol.value[0], atol=1e-8)
 
 
+def test_reversed_times_under_jit_are_a_result_code():
+    """Outside jit a reversed ts is refused by name; under jit (the times traced) the solve says
+    `unordered_times` with NaN values (audit: it returned `successful` and a wrong trajectory)."""
+    m = g.from_terms([1.0], [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": 1.0}])
+    ts = jnp.linspace(1.0, 0.0, 11)
+    with pytest.raises(g.GMRInputError, match="strictly increasing"):
+        g.simulate(m, g.NoInput(), ts, jnp.array([0.1]))
+    sol = jax.jit(lambda t: g.simulate(m, g.NoInput(), t, jnp.array([0.1]), throw=False))(ts)
+    assert sol.status == "unordered_times" and np.all(np.isnan(np.asarray(sol.value[0])))
+    ok = jax.jit(lambda t: g.simulate(m, g.NoInput(), t, jnp.array([0.1]), throw=False))(ts[::-1])
+    assert ok.status == "successful"
+
+
 def test_divergence_is_flagged_not_returned():
     m = g.from_terms([1.0], [{"dof": 0, "physics": "stiffness", "order": 3, "coefficient": -1.0}])
     sol = g.simulate(m, g.NoInput(), jnp.linspace(0, 10, 11), jnp.array([2.0]),

@@ -121,8 +121,9 @@ class SweepSettings(eqx.Module):
 
 class BasinMap(eqx.Module):
     """`wells` (NA, NF, dof): index of the well each cell ended in (ordered by deformation),
-    -1 when not settled or failed; `config` (NA, NF): bit i set = cell i in its second well
-    (-1 as above); `result` (NA, NF) RESULTS codes; `x_final`, `v_final` (NA, NF, dof);
+    -1 when not settled or failed; `config` (NA, NF): for bistable cells, bit i set = cell i in
+    its second well; with K well slots per cell (a tri-stable DOF: K = 3), the sum of cell i's
+    well index times K^i (`plots.config_label(config, dof, K)` writes it); -1 as above; `result` (NA, NF) RESULTS codes; `x_final`, `v_final` (NA, NF, dof);
     `steps` (NA, NF): accepted integrator steps of the solve that produced the point (its
     chunk's, under "joint" batching)."""
 
@@ -152,7 +153,8 @@ def _final_state(model, settings: SweepSettings, x0, f, a, centre, span):
 
 
 def classify(x1, v1, code, wells, span, settings: SweepSettings):
-    """Well index per cell (-1: not settled, failed, diverged) and the configuration bits."""
+    """Well index per cell (-1: not settled, failed, diverged) and the configuration code (sum of
+    well index i times K^i over cells i, K = wells.shape[1]: the bit field for bistable cells)."""
     dist = jnp.abs(x1[:, None] - wells)  # (dof, max_wells)
     dist = jnp.where(jnp.isnan(wells), jnp.inf, dist)
     k = jnp.argmin(dist, axis=1)
@@ -162,8 +164,10 @@ def classify(x1, v1, code, wells, span, settings: SweepSettings):
     good = code == RESULTS.successful._value
     idx = jnp.where(settled & good, k, -1)
     code = jnp.where(good & ~jnp.all(settled), RESULTS.not_settled._value, code)
-    bits = jnp.sum(jnp.where(idx == 1, 2 ** jnp.arange(idx.shape[0]), 0))
-    config = jnp.where(jnp.all(idx >= 0), bits, -1)
+    # one digit per cell in base K (the well slots): bit i for bistable cells (K = 2); a third well
+    # of a tri-stable DOF is its own configuration, not the first well's (audit: it was)
+    code_of = jnp.sum(jnp.where(idx >= 0, idx, 0) * wells.shape[1] ** jnp.arange(idx.shape[0]))
+    config = jnp.where(jnp.all(idx >= 0), code_of, -1)
     return idx, config, code
 
 

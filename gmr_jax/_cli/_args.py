@@ -126,15 +126,16 @@ def x_range(spec):
     return a, b
 
 
-def recorded_range(model_path, n_dof: int) -> np.ndarray | None:
-    """(n_dof, 2) the model file's `data_range` (each DOF's training displacement, written by `gmr fit`), or None
-    where the file has none (a hand-written model) or cannot be read as JSON."""
+def recorded_range(model_path, n_dof: int, key: str = "data_range") -> np.ndarray | None:
+    """(n_dof, 2) the model file's `data_range` (each DOF's training displacement, written by `gmr fit`; `key`
+    "speed_range": its training velocity), or None where the file has none (a hand-written model, or one written
+    before the key) or cannot be read as JSON."""
     import json
 
     if model_path is None:
         return None
     try:
-        rng = json.loads(Path(model_path).read_text()).get("data_range")
+        rng = json.loads(Path(model_path).read_text()).get(key)
     except (OSError, ValueError, AttributeError):
         return None
     return None if rng is None else np.asarray(rng, float).reshape(n_dof, 2)

@@ -193,6 +193,49 @@ def _settle_advice(model, wells, settle_time: float, max_configs: int = 64) -> s
             f"(now {settle_time:g} s): rerun with --settle-time {float(f'{need:.2g}'):g}")
 
 
+#: `gmr basins` notes a barrier whose crossing takes more than this many times the fastest recorded speed
+SPEED_FACTOR = 2.0
+
+
+def _beyond_speed(model, model_path, wells, x0) -> str | None:
+    """Where crossing a barrier takes speeds the damping law was not fitted at: from each DOF's start well, the
+    lowest barrier dV of the model's restoring law to a neighbouring well gives the speed sqrt(2 dV / m) a
+    crossing needs at the least; above `SPEED_FACTOR` times the fastest recorded speed (the model file's
+    `speed_range`), the damping there is the local law extrapolated. Small vibrations do not show terms that act
+    at speed (v^3, v|v|, x^2 v far from the wells), and the file's band does not include them (audit: a v^3 term
+    left out, the damping at crossing speeds 2.6 x low with a ±0.3 % band, 70 % basin agreement). A sentence, or
+    None (no speed_range, or crossings within it)."""
+    from ._show import barriers, equilibria
+
+    d = model.n_dof
+    vr = recorded_range(model_path, d, "speed_range")
+    if vr is None:
+        return None
+    vmax = np.max(np.abs(vr), axis=1)
+    masses = np.asarray(model.masses, float)
+    eqs = equilibria(model.stiffness)
+    worst = None
+    for i, rows in enumerate(barriers(model.stiffness, eqs)):
+        start = float(np.asarray(wells)[i, 0] if x0 is None else np.asarray(x0)[i])  # default: the first well
+        heights = [b["from_left"] for b in rows if abs(b["left"] - start) < 1e-6 * max(1.0, abs(start)) + 1e-9]
+        heights += [b["from_right"] for b in rows if abs(b["right"] - start) < 1e-6 * max(1.0, abs(start)) + 1e-9]
+        heights = [h for h in heights if h > 0]
+        if not heights or vmax[i] <= 0:
+            continue
+        need = float(np.sqrt(2.0 * min(heights) / masses[i]))
+        if need > SPEED_FACTOR * vmax[i] and (worst is None or need / vmax[i] > worst[0]):
+            worst = (need / vmax[i], i, need)
+    if worst is None:
+        return None
+    ratio, i, need = worst
+    return (f"crossing DOF {i}'s barrier from its start well takes |v| of at least {need:.3g} "
+            f"(sqrt(2 barrier / mass)), {ratio:.3g} x the fastest recorded ({vmax[i]:.3g}, the model file's "
+            f"speed_range): the damping along the crossings is the small vibrations' law extrapolated; terms that "
+            f"act only at speed (v^3, v|v|) are not in those data and not in the band, and the map's boundaries "
+            f"depend on the damping. Where the structure may have them, record a motion at those speeds (a "
+            f"crossing record: gmr refine --free damping) before trusting the boundaries")
+
+
 def run(args) -> int:
     import gmr_jax as gmr
 
@@ -255,6 +298,9 @@ def run(args) -> int:
     beyond = _beyond_data(model, args.model, A, args.load)
     if beyond:
         print(f"  note: {beyond}")
+    fast = _beyond_speed(model, args.model, wells, x0)
+    if fast:
+        print(f"  note: {fast}")
     print(f"wrote {out}/basins.npz and basins.png (.pdf)")
     stage("done")
     return 0

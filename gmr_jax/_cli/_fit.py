@@ -76,6 +76,15 @@ def data_range(recs):
     return [[float(x[:, i].min()), float(x[:, i].max())] for i in range(x.shape[1])]
 
 
+def speed_range(recs):
+    """[min, max] of each DOF's velocity over the training recordings (v as recorded, or the central difference
+    of x where it was not): the speeds the damping law was fitted at (`gmr basins` says when crossing a barrier
+    takes much more)."""
+    v = np.concatenate([np.asarray(r.v) if r.v is not None else np.gradient(np.asarray(r.x), r.dt, axis=0)
+                        for r in recs])
+    return [[float(v[:, i].min()), float(v[:, i].max())] for i in range(v.shape[1])]
+
+
 def shared_design_of(stats: dict) -> list[dict]:
     """Per DOF, `reconstruct`'s `stats["shared_design"]` (JSON-ready), or [] where the fit had none
     (a single DOF, GMC-SINDy, or sharing off)."""
@@ -167,7 +176,8 @@ def run(args) -> int:
     ranges = data_range(recs)  # the fitted region, written with the model and its band printed over it
     gmr.save_model(model, args.out, method=st["method"],
                    library={"r": lib.restoring_order, "d": lib.damping_order}, training=st["training"],
-                   warnings=load_warnings + list(st["warnings"]), data_range=ranges, **extra)
+                   warnings=load_warnings + list(st["warnings"]), data_range=ranges, speed_range=speed_range(recs),
+                   **extra)
     print(f"{st['method']} model from {len(recs)} recording(s) -> {args.out}")
     for line in _term_table(model, {"terms": model.terms()}, 4):  # equations, coefficients, std. errors
         print(line)

@@ -17,6 +17,7 @@ from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, term_
 
 #: keys `show` prints in their own sections; any other key is listed at the end.
 _KNOWN = ("format", "topology", "masses", "terms", "method", "library", "training", "warnings", "data_range",
+          "speed_range",
           "resolution", "shared_design", "coordination")
 
 
@@ -127,6 +128,54 @@ def barriers(stiffness, eqs) -> list[list[dict]]:
     return out
 
 
+#: draws of the file's covariance behind the barrier intervals `gmr show` prints
+BARRIER_DRAWS = 400
+
+
+def barrier_intervals(model, bars, n: int = BARRIER_DRAWS, seed: int = 0):
+    """Per DOF and barrier of `bars`: the 2.5-97.5 % range of the saddle and of both barrier heights over `n`
+    models drawn from the file's covariance (`sample_models`), and the share of draws that keep a saddle with a
+    stable well on each side near the model's (a draw that loses them has no such barrier). None without a
+    covariance. The barriers are a nonlinear function of the coefficients: their spread is read from the
+    draws, not propagated linearly (audit: barriers printed to 4 digits, 22-35 % off, with no interval)."""
+    import jax
+
+    from .._model._uncertainty import sample_models
+
+    if getattr(model, "covariance", None) is None:
+        return None
+    draws = np.asarray(sample_models(model, jax.random.key(seed), n).stiffness, float)  # (n, D, K)
+    out = []
+    for i, rows in enumerate(bars):
+        eqs = equilibria(draws[:, i, :])
+        found = []
+        for b in rows:
+            width = b["right"] - b["left"]
+            vals = []
+            for c, zs in zip(draws[:, i, :], eqs):
+                got = [r for r in barriers([c], [zs])[0]
+                       if abs(r["saddle"] - b["saddle"]) < 0.5 * width and abs(r["left"] - b["left"]) < 0.5 * width
+                       and abs(r["right"] - b["right"]) < 0.5 * width]
+                if got:
+                    r = min(got, key=lambda r: abs(r["saddle"] - b["saddle"]))
+                    vals.append((r["saddle"], r["from_left"], r["from_right"]))
+            v = np.asarray(vals, float).reshape(-1, 3)
+            q = np.percentile(v, [2.5, 97.5], axis=0) if len(v) else np.full((2, 3), np.nan)
+            found.append({"kept": len(v) / n, "saddle": q[:, 0], "from_left": q[:, 1], "from_right": q[:, 2]})
+        out.append(found)
+    return out
+
+
+def _interval_line(s: dict, p: int) -> str:
+    rng = lambda a: f"[{_g(a[0], p)}, {_g(a[1], p)}]"  # noqa: E731
+    if s["kept"] == 0:
+        return (f"(none of {BARRIER_DRAWS} models drawn from the file's covariance keeps these two wells and the saddle: "
+                f"the data do not fix this barrier)")
+    return (f"(95 % of the models drawn from the file's covariance: saddle {rng(s['saddle'])}, from the left "
+            f"{rng(s['from_left'])}, from the right {rng(s['from_right'])}; "
+            f"{100 * s['kept']:.3g} % of the draws keep the two wells and the saddle)")
+
+
 def _g(x, p):
     return f"{x:.{p}g}"
 
@@ -212,16 +261,26 @@ def _describe(model, d: dict, name: str, p: int) -> str:
     out += ["", "Energy barriers between neighbouring wells (V(saddle) - V(well), V = integral of F dx):"]
     if not any(bars):
         out.append("  none (no DOF has two stable wells with a saddle between them)")
+    spread = barrier_intervals(model, bars) if any(bars) else None
     for i, rows in enumerate(bars):
-        for b in rows:
+        for k, b in enumerate(rows):
             out.append(f"  DOF {i}: wells {_g(b['left'], p)} | {_g(b['right'], p)} over the saddle at "
                        f"{_g(b['saddle'], p)}: {_g(b['from_left'], p)} from the left well, "
                        f"{_g(b['from_right'], p)} from the right")
+            if spread is not None:
+                out.append("    " + _interval_line(spread[i][k], 3))
+    if spread is None and any(bars):
+        out.append("  (no covariance in this file: no interval on these numbers)")
 
     out += ["", "Training:"]
     if rng is not None:
         out.append("  data range of x: " + ", ".join(f"DOF {i} [{_g(a, p)}, {_g(b, p)}]"
                                                     for i, (a, b) in enumerate(rng)))
+    vr = d.get("speed_range")
+    if vr is not None:
+        out.append("  data range of v (the speeds the damping law was fitted at; beyond them it is extrapolated): "
+                   + ", ".join(f"DOF {i} [{_g(a, p)}, {_g(b, p)}]"
+                               for i, (a, b) in enumerate(np.asarray(vr, float).reshape(n, 2))))
     tr = d.get("training")
     if isinstance(tr, dict) and tr:
         for rec, sc in tr.items():

@@ -120,6 +120,30 @@ def _flat_samples(at: np.ndarray, run: int) -> int:
     return int(lengths[lengths >= run].sum())
 
 
+#: Rule 3, brief saturations: at least this share (and `CLIP_MIN_SAMPLES`) of the samples at the extreme value,
+#: where no value just inside it repeats (`_at_a_rail`)
+CLIP_RAIL_FRACTION = 1e-4
+
+
+def _at_a_rail(col: np.ndarray, at: np.ndarray, tol: float) -> bool:
+    """The samples `at` the column's extreme are a rail: at least `CLIP_MIN_SAMPLES` and `CLIP_RAIL_FRACTION`
+    of them, while the value of the sample nearest the extreme inside it occurs at most twice or a fifth as
+    often. A response that saturates briefly sits at the rail for a sample or two per peak (audit: an
+    accelerometer clipped at its 99.9 % quantile, 52 samples in runs of 1-2, moved a barrier by 63 % unflagged);
+    a noise-free periodic signal repeats its top sample every period but every other value as well, and a
+    quantised one (an encoder) repeats every level."""
+    n_top = int(at.sum())
+    if n_top < max(CLIP_MIN_SAMPLES, CLIP_RAIL_FRACTION * col.size):
+        return False
+    inside = col[~at]
+    if inside.size == 0:
+        return False
+    top = col[at][0]
+    nearest = inside[np.argmin(np.abs(inside - top))]
+    n_next = int(np.sum(np.abs(col - nearest) <= tol))
+    return n_next <= max(2, n_top // 5)
+
+
 def check_clipping(name: str, columns: dict) -> list[str]:
     """Rule 3: a measured column is clipped (saturated sensor or recorder) when at least
     `CLIP_FRACTION` (0.5 %) of its samples, and at least `CLIP_MIN_SAMPLES` (5), sit at its
@@ -128,7 +152,9 @@ def check_clipping(name: str, columns: dict) -> list[str]:
     value, so a noise-free periodic input (which repeats its top sample every period: 1 % of
     a 10 Hz sine at 1 kHz) is not flagged; a continuous signal with noise reaches its
     extreme once (clean built-in data: 1 sample in every column). A record clipped at its
-    97th percentile: 3 %. Constant columns (a zero force column) are skipped.
+    97th percentile: 3 %. Brief saturations (runs of 1-2 samples, a fast response sampled
+    slowly) are found by their rail instead (`_at_a_rail`). Constant columns (a zero force
+    column) are skipped.
 
     `columns`: label (e.g. "x0", "base_acc") -> 1-D array of measured samples."""
     out = []
@@ -141,11 +167,14 @@ def check_clipping(name: str, columns: dict) -> list[str]:
         need = max(CLIP_MIN_SAMPLES, CLIP_FRACTION * col.size)
         for side, value, at in (("maximum", col.max(), col >= col.max() - tol),
                                 ("minimum", col.min(), col <= col.min() + tol)):
-            count = _flat_samples(at, CLIP_RUN)
+            count, how = _flat_samples(at, CLIP_RUN), "in flat tops"
+            if count < need and _at_a_rail(col, at, tol):  # brief saturations: runs of 1-2 samples at one value
+                count, how = int(at.sum()), "a sample or two at a time, while no value just inside it repeats"
+                need = count
             if count >= need:
                 out.append(
                     f"{name}: column {label} looks clipped: {count} samples ({100 * count / col.size:.1f} %) sit "
-                    f"exactly at its {side} {_g(value)} in flat tops; the sensor or the recorder probably "
+                    f"exactly at its {side} {_g(value)}, {how}; the sensor or the recorder probably "
                     f"saturated, and the fit takes the flat tops as real motion: re-record with more range, or cut "
                     f"the clipped parts"
                 )

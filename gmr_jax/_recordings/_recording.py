@@ -2,6 +2,7 @@
 
 import csv
 import io
+import math
 import os
 import re
 import warnings
@@ -29,8 +30,9 @@ class Recording:
     integrated with drift removal (`_integrate`), listed in `derived`, and described in
     `integration` (source, high-pass cut-off, equilibrium). The integrated x has zero mean: the
     equilibrium it vibrates about is unobservable unless given as `equilibrium` (D,), where the
-    mean of x is then put. From `a` alone, x holds each mass's displacement relative to the base
-    until `complete(topology)` makes chain cell deformations of it.
+    mean of x is then put (for a chain, each cell's deformation at rest). From `a` alone, x holds
+    each mass's displacement relative to the base until `complete(topology)` makes chain cell
+    deformations of it (with the equilibrium as cell deformations).
 
     Construction checks types and shapes (float arrays, not integer, boolean or object ones;
     one length N; D columns in x, v, a, force; D masses; a 1-D x, v, a or force is one DOF)
@@ -163,7 +165,11 @@ class Recording:
         topo = as_topology(topology)
         if info and info["from"] == "a" and info["topology"] is None:  # not yet given a topology
             if topo.name == "chain" and x.shape[1] > 1:  # mass displacements -> cell deformations
-                x = np.diff(x, axis=1, prepend=0.0)
+                # the given equilibrium is each cell's deformation at rest (the docs' x), not a mass's
+                # position: difference the vibration, then place it (audit: cell 1's wells were moved by
+                # cell 0's rest deformation)
+                eq = np.zeros(x.shape[1]) if self.equilibrium is None else np.asarray(self.equilibrium, float)
+                x = np.diff(x - eq, axis=1, prepend=0.0) + eq
                 v = np.diff(v, axis=1, prepend=0.0)
             info = {**info, "topology": topo.name, "coordinates": (
                 "cell deformations" if topo.name == "chain" else
@@ -449,9 +455,9 @@ def _read_csv(path: Path, src: str, raw: bool = False):
     expected = ("t, x0.. (one per DOF; or v0.. or a0.. alone), optional v0.., a0.., f0.., base_acc, m0.. (masses), "
                 "equilibrium0.. (one DOF: x, v, a, f or force, m or mass, equilibrium also read as x0, v0, a0, f0, m0, "
                 "equilibrium0)")
-    t_scale = 1.0
+    t_scale, scales = 1.0, [1.0] * len(header)
     if not raw:  # the names a one-DOF lab file uses (and the NPZ keys), in any case, with a unit: "v [m/s]"
-        header, t_scale = _standard_names(header, src)
+        header, t_scale, scales = _standard_names(header, src)
 
     def known(h):
         if h in ("t", "base_acc"):
@@ -491,7 +497,7 @@ def _read_csv(path: Path, src: str, raw: bool = False):
             except ValueError:
                 raise GMRInputError(f"{src}: line {line_no} (sample {j}), column '{header[c]}': {cell.strip()!r} "
                                     f"is not a number; fix or remove that row") from None
-    col = {h: data[:, i] for i, h in enumerate(header)}
+    col = {h: data[:, i] * scales[i] for i, h in enumerate(header)}
     if raw:
         return col
 
@@ -528,13 +534,81 @@ def _numbers(cells) -> bool:
     return bool(cells)
 
 
+#: length and angle units of a CSV header's kinematic columns (x, v, a, base_acc, equilibrium): factor to m or rad
+LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "um": 1e-6, "µm": 1e-6, "μm": 1e-6, "km": 1e3, "in": 0.0254}
+ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180, "°": math.pi / 180}
+#: standard gravity: an acceleration column in g ("a0 [g]", what many accelerometers give)
+STANDARD_GRAVITY = 9.80665
+FORCE_UNITS = {"N": 1.0, "kN": 1e3, "mN": 1e-3}
+MASS_UNITS = {"kg": 1.0, "g": 1e-3}
+_PER_S = re.compile(r"^(.+?)/s$")
+_PER_S2 = re.compile(r"^(.+?)(?:/s\^2|/s2|/s²|/s\*\*2|/s/s)$")
+
+
+def _unit_factor(kind: str, unit: str, column: str, src: str) -> tuple[str, float]:
+    """(family, factor to SI) of a column's unit: family "length"/"angle" (the factor per m or rad; 'g' is
+    "g"), "force" or "mass"."""
+    u = unit.replace(" ", "")
+    known = (f"x/equilibrium {sorted(LENGTH_UNITS) + sorted(ANGLE_UNITS)}, v in those per s ('mm/s'), a and base_acc "
+             f"per s^2 ('m/s^2') or 'g', force {sorted(FORCE_UNITS)}, mass {sorted(MASS_UNITS)}")
+
+    def length(name):
+        if name in LENGTH_UNITS:
+            return "length", LENGTH_UNITS[name]
+        if name in ANGLE_UNITS:
+            return "angle", ANGLE_UNITS[name]
+        return None
+
+    found = None
+    if kind in ("x", "equilibrium"):
+        found = length(u)
+    elif kind == "v":
+        m = _PER_S.match(u)
+        found = length(m.group(1)) if m else None
+    elif kind in ("a", "base_acc"):
+        m = _PER_S2.match(u)
+        found = ("g", STANDARD_GRAVITY) if u == "g" else (length(m.group(1)) if m else None)
+    elif kind == "f":
+        found = ("force", FORCE_UNITS[u]) if u in FORCE_UNITS else None
+    elif kind == "m":
+        found = ("mass", MASS_UNITS[u]) if u in MASS_UNITS else None
+    if found is None:
+        raise GMRInputError(f"{src}: the unit '{unit}' of column '{column}' is not one gmr_jax converts; known: "
+                            f"{known}. Convert the column, or leave the unit out of the header (the values are then "
+                            f"taken as they are, in the model's units)")
+    return found
+
+
+def _column_scales(names, units, src) -> list[float]:
+    """Factors that bring a CSV's labelled columns to one coherent set of units: lengths (and 'g') to the first
+    labelled kinematic column's length unit, or to m where a force or mass column carries a unit (then N and kg,
+    coherent with m and s); unlabelled columns are taken as they are. An accelerometer in g becomes m/s^2 (audit:
+    'a0 [g]' was read as m/s^2, the barriers 75 % off, and nothing said so)."""
+    kind_of = {n: re.sub(r"\d+$", "", n) for n in names}
+    parsed = {n: _unit_factor(kind_of[n], u, n, src) for n, u in zip(names, units) if u is not None and n != "t"}
+    if not parsed:
+        return [1.0] * len(names)
+    families = {fam for fam, _ in parsed.values() if fam in ("length", "angle")}
+    if len(families) > 1:
+        raise GMRInputError(f"{src}: the header mixes lengths and angles ({', '.join(f'{n} [{u}]' for n, u in zip(names, units) if u)}); "
+                            f"give the kinematic columns in one kind of unit")
+    if "angle" in families and any(fam == "g" for fam, _ in parsed.values()):
+        raise GMRInputError(f"{src}: an acceleration in g beside angles in the header: give angular accelerations in "
+                            f"rad/s^2 or deg/s^2")
+    coherent_si = any(fam in ("force", "mass") for fam, _ in parsed.values())
+    ref = 1.0 if coherent_si else next((f for n, (fam, f) in parsed.items() if fam in ("length", "angle")), 1.0)
+    return [1.0 if n not in parsed else parsed[n][1] / (ref if parsed[n][0] in ("length", "angle", "g") else 1.0)
+            for n in names]
+
+
 def _standard_names(header, src):
     """A CSV header's names as the contract's (`x0`, `v0`, ...): a unit in brackets or parentheses taken off
     ("v [m/s]", "t (ms)"), the case ignored where the lower-case name is the contract's, `time` read as `t`, and the
-    one-DOF names (`x`, `v`, `a`, `f`, `force`, `m`, `mass`, `masses`, `equilibrium`) as `x0`, `m0`, ... The time column's unit, where given,
-    scales it to seconds (`TIME_UNITS`); the others' units are the model's (not converted). Returns the names and
-    the factor of t."""
-    out, t_scale = [], 1.0
+    one-DOF names (`x`, `v`, `a`, `f`, `force`, `m`, `mass`, `masses`, `equilibrium`) as `x0`, `m0`, ... The time
+    column's unit, where given, scales it to seconds (`TIME_UNITS`); the other labelled columns are brought to one
+    coherent set of units (`_column_scales`; the model is in the file's length unit, or SI where a force or mass is
+    labelled). Returns the names, the factor of t and the factor of every column."""
+    out, units, t_scale = [], [], 1.0
     for h in header:
         m = _UNIT.match(h)
         name, unit = (m.group(1).strip(), m.group(2).strip()) if m else (h, None)
@@ -550,7 +624,11 @@ def _standard_names(header, src):
                 raise GMRInputError(f"{src}: the time column's unit '{unit}' is not one of {sorted(TIME_UNITS)}; "
                                     f"give t in seconds (or one of those units in the header, 't [ms]')")
         out.append(name)
-    return out, t_scale
+        units.append(unit or None)
+    known = [n == "t" or n == "base_acc" or bool(re.fullmatch(f"({'|'.join(_NUMBERED)})\\d+", n)) for n in out]
+    scales = _column_scales([n for n, k in zip(out, known) if k], [u for u, k in zip(units, known) if k], src)
+    it = iter(scales)
+    return out, t_scale, [next(it) if k else 1.0 for k in known]
 
 
 def _read_npz(path: Path, src: str, raw: bool = False):

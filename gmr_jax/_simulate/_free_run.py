@@ -2,8 +2,8 @@
 (the output error of `gmr discover`, per DOF, as one public call).
 
 The run starts from the recorded state at `sim_start` (half a Savitzky-Golay window in when v
-was estimated from x), the input is low-passed at 3x its band edge and interpolated by a
-cubic spline (`_discover.smooth_input`, `sampled_spline`), sgn(v) terms are smoothed to
+was estimated from x), the input is low-passed at 3x its band edge where it carries white noise
+and interpolated by a cubic spline (`_discover.smooth_input`, `sampled_spline`), sgn(v) terms are smoothed to
 tanh(v / eps) with eps = 1e-3 rms(v), and the step budget grows with the record: the same
 simulation `discover` reports as output error. An x integrated from v or a is compared after the
 same drift removal (`_offset.comparable`), its unobservable equilibrium placed by the model.
@@ -80,7 +80,7 @@ def free_run(model: AbstractMechanicalModel, recording, *, columns: dict | None 
     `diverged` (x left the box of 100 recorded spans around the recorded mean, or turned
     non-finite) or the solver's failure code; `stats["message"]` says it in words.
     """
-    from .._discover._discover import SIM, sim_start, smooth_input
+    from .._discover._discover import INPUT_NOISE_SHARE, SIM, sim_start, smooth_input, white_share
     from .._discover._offset import comparable, place
 
     if not isinstance(model, AbstractMechanicalModel):
@@ -94,7 +94,11 @@ def free_run(model: AbstractMechanicalModel, recording, *, columns: dict | None 
         notes = ["no input column (base_acc or force): simulated as a free decay from the first state"]
         warnings.warn(rec.free_decay_sentence("the model is run"), GMRDataWarning, stacklevel=2)
     else:
-        notes = ["input low-passed at 3x its band edge, cubic-spline interpolated"]
+        b, f = rec.inputs()
+        noisy = any(np.std(c) > 0 and white_share(c, rec.dt) >= INPUT_NOISE_SHARE
+                    for c in np.column_stack([b, f]).T)
+        notes = ["input low-passed at 3x its band edge (it carries white noise), cubic-spline interpolated" if noisy
+                 else "input cubic-spline interpolated (no measurable noise on it: not filtered)"]
     if not rec.equilibrium_observed:
         rec = place(model, [rec])[0][0]
         notes.append("x integrated from the recording's " + rec.integration["from"] +

@@ -170,7 +170,10 @@ def _simulate(model, inputs, ts, x0, v0, integrator, *, box, throw):
     traj = integrate(vector_field(model, inputs), ts[0], ts[-1], (x0, v0), integrator,
                      saveat=dfx.SaveAt(ts=ts), box=(lo, hi), jump_ts=inputs.jump_times(),
                      step_ts=inputs.step_times())
-    good = traj.result == RESULTS.successful
+    # checked here as well as in `_check_inputs`: under jit the times are traced and only a code can say it
+    ordered = jnp.all(jnp.diff(ts) > 0) & jnp.all(jnp.isfinite(ts))
+    result = RESULTS.where(ordered, traj.result, RESULTS.unordered_times)
+    good = result == RESULTS.successful
     xs, vs = (jnp.where(good, y, jnp.nan) for y in traj.ys)
-    return error_if_failed(Solution(value=(xs, vs), result=traj.result, stats=traj.stats), throw)
+    return error_if_failed(Solution(value=(xs, vs), result=result, stats=traj.stats), throw)
 

@@ -6,31 +6,47 @@ from matplotlib.colors import BoundaryNorm, ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
+from .._errors import GMRInputError
 from ._save import save_with_pdf
 
 
-def config_label(config: int, n_dof: int) -> str:
-    """0-1-1-0-0 style name (cell 0 first) of a configuration bit field."""
+def _digits(config: int, n_dof: int, base: int) -> list[int]:
+    return [(config // base**i) % base for i in range(n_dof)]
+
+
+def config_label(config: int, n_dof: int, base: int = 2) -> str:
+    """0-1-1-0-0 style name (cell 0 first) of a configuration code (`BasinMap.config`: a bit
+    field for bistable cells; digits in `base` K with K wells per cell, e.g. 0-2 for a tri-stable
+    cell 1 in its third well)."""
     if config < 0:
         return "not settled / failed"
-    return "-".join(str((config >> i) & 1) for i in range(n_dof))
+    return "-".join(str(d) for d in _digits(int(config), n_dof, base))
 
 
-def config_colour(config: int, n_dof: int) -> tuple:
+def config_colour(config: int, n_dof: int, base: int = 2) -> tuple:
     """The colour of a configuration, the same in every figure of an `n_dof` structure (it does
     not depend on which configurations a map happens to contain); dark grey: not settled."""
     if config < 0:
         return (0.15, 0.15, 0.15, 1.0)
-    n_all = 2**n_dof
+    n_all = base**n_dof
     if n_all <= 20:
         return matplotlib.colormaps["tab20"](config)
     return matplotlib.colormaps["nipy_spectral"](0.05 + 0.9 * config / (n_all - 1))
 
 
+def well_base(wells) -> int:
+    """The digit base of `BasinMap.config` for stable equilibria `wells` ((dof, k), NaN-padded):
+    the most wells of any DOF (at least 2)."""
+    w = np.asarray(wells, float)
+    w = w.reshape(1, -1) if w.ndim < 2 else w
+    return max(2, w.shape[1])
+
+
 def well_label(config: int, n_dof: int, wells=None) -> str:
     """`config_label`, with the well's position for one DOF where `wells` ((dof, k) stable equilibria) is given:
     "1 (x = 1.131)"."""
-    label = config_label(config, n_dof)
+    base = 2 if wells is None else well_base(wells)
+    label = config_label(config, n_dof, base)
     if wells is None or n_dof != 1 or config < 0:
         return label
     w = np.asarray(wells, float).reshape(1, -1)[0]
@@ -44,12 +60,19 @@ def basin_figure(f, A, config, n_dof: int, path=None, title: str = "", *, ax=Non
     the same colour in every figure of the structure (`config_colour`), so maps side by side
     (model vs truth) compare by eye. Draws into `ax` when given (a notebook's own layout), else
     a new figure. Saved to `path` when given (and as PDF beside it); returns the `Figure`. `wells`: the stable
-    equilibria per DOF ((dof, k), NaN-padded), for a one-DOF legend that says where each well is."""
+    equilibria per DOF ((dof, k), NaN-padded), for a one-DOF legend that says where each well is,
+    and the digit base of the configuration codes where a DOF has more than two wells (without
+    them the codes are read as bit fields, and a code beyond 2^n_dof is refused)."""
     config = np.asarray(config)
+    base = 2 if wells is None else well_base(wells)
+    if config.size and int(config.max()) >= base**n_dof:
+        raise GMRInputError(f"configuration code {int(config.max())} is beyond the bit fields of {n_dof} bistable "
+                            f"DOF(s): a DOF has more than two wells; pass wells=... (the sweep's wells) so that the "
+                            f"codes are read in their base")
     values = sorted(set(config.ravel().tolist()))
     index = {v: k for k, v in enumerate(values)}
     img = np.vectorize(index.get)(config)
-    colors = [config_colour(v, n_dof) for v in values]
+    colors = [config_colour(v, n_dof, base) for v in values]
     cmap = ListedColormap(colors)
     norm = BoundaryNorm(np.arange(len(values) + 1) - 0.5, len(values))
     if ax is None:
