@@ -500,6 +500,11 @@ def actuate(
     wells = np.asarray(wells, float)
     if wells.ndim != 2 or wells.shape[0] != d or wells.shape[1] < 2 or np.any(np.isnan(wells[:, :2])):
         raise GMRInputError("every cell needs two stable wells to be actuated between (check x_range)")
+    more = [i for i in range(d) if np.sum(np.isfinite(wells[i])) > 2]
+    if more:  # the target is one bit per cell: a third well would be read as one of the first two
+        raise GMRInputError(f"cell(s) {more} have more than two stable wells ({np.round(wells[more[0]], 6).tolist()}): "
+                            f"actuation designs between two wells per cell; give the two (wells=, or an x_range / "
+                            f"--x-range that holds only them)")
     wells = wells[:, :2]
     wj = jnp.asarray(wells)
     x0 = wj[:, 0] if x0 is None else jnp.asarray(x0, float)
