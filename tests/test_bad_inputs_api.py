@@ -280,6 +280,14 @@ CASES = [
     ("simulate_ts_one_point", _simulate(ts=jnp.array([0.0])), r"ts must be a 1-D array of at least 2 save times"),
     ("simulate_inputs_type", _simulate(inputs=0.0), r"inputs must be an input object"),
     ("simulate_box_negative", _simulate(extra={"box": -1.0}), r"simulate: box must be > 0"),
+    # stls: shapes are static, so refused at the call (audit: tracebacks from inside JAX)
+    ("stls_target_n_by_1", lambda: g.stls(jnp.ones((50, 3)), jnp.ones((50, 1))),
+     r"stls: y has shape \(50, 1\); give one target as \(samples,\), y\[:, 0\]"),
+    ("stls_theta_transposed", lambda: g.stls(jnp.ones((3, 50)), jnp.ones(50)),
+     r"stls: theta has 3 rows \(samples\) but y has 50 samples \(theta looks transposed: pass theta.T\)"),
+    ("stls_theta_1d", lambda: g.stls(jnp.ones(50), jnp.ones(50)), r"stls: theta must be the library matrix"),
+    ("stls_weights", lambda: g.stls(jnp.ones((50, 3)), jnp.ones(50), weights=jnp.ones(49)),
+     r"stls: weights must be one per sample"),
 ]
 
 

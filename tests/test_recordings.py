@@ -525,6 +525,18 @@ def test_lab_csv_headers_units_case_time_and_equilibrium(tmp_path):
         g.load_recording(tmp_path / "nohdr.csv")
 
 
+def test_lists_are_taken_as_arrays():
+    """A notebook's lists of floats make a recording as arrays do (audit: a raw TypeError from a slice)."""
+    t = np.linspace(0.0, 1.0, 200)
+    x, b = np.sin(5 * t), np.cos(t)
+    r = g.Recording(t=list(t), x=list(x), base_acc=tuple(b))
+    ref = g.Recording(t=t, x=x, base_acc=b)
+    for k in ("t", "x", "base_acc"):
+        np.testing.assert_array_equal(getattr(r, k), getattr(ref, k))
+    with pytest.raises(g.GMRInputError, match="not a rectangular array"):
+        g.Recording(t=list(t), x=[[1.0, 2.0], [3.0]], base_acc=list(b))
+
+
 def test_labelled_units_are_made_coherent(tmp_path):
     """A unit in a header is applied, not dropped (audit: an accelerometer file 'a0 [g]' was read as m/s^2, the
     barriers 75 % off, and nothing said so): g becomes the file's length unit per s^2, lengths follow the first

@@ -399,3 +399,25 @@ def test_cli_refine_says_when_refinement_made_the_free_run_worse():
     assert runs[0]["given_nrmse"][0] < 1e-3 < runs[0]["nrmse"][0]
     assert len(warned) == 1 and "refinement made the free run worse" in warned[0] and "keep the given" in warned[0]
     assert _longer_horizons(truth, [rec], None, given=off)[1] == []  # better: silent
+
+
+def test_a_restoring_law_moved_beyond_its_band_is_warned():
+    """`refine` compares the refined restoring law with the given one over the recorded range, against the
+    given model's band: moved by 2.5 % where the band is ±0.7 % (the free stiffness terms absorbed a missing damping
+    term: audit, tri-stable law 0.007 % -> 0.96 %, band ±0.09 %) is warned; moved within the band, or a model without a
+    covariance, is not."""
+    from gmr_jax._refine._refine import _moved_law_warnings
+
+    cov = [{"dof": 0, "terms": [["stiffness", 1], ["stiffness", 3]], "matrix": np.diag([1e-6, 1e-6]).tolist()}]
+    terms = [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -1.0},
+             {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 1.0}]
+    given = g.from_terms([1.0], terms, covariance=cov)
+    rec = g.Recording(t=np.linspace(0, 10, 1001), x=1.2 * np.sin(np.linspace(0, 10, 1001)), base_acc=np.zeros(1001))
+    band = g.from_terms([1.0], terms)  # no covariance
+    for factor, warned in ((1.01, True), (1.0002, False)):
+        moved = dataclasses.replace(given, stiffness=given.stiffness * jnp.array([[1.0, factor, 1.0, 1.0]]))
+        w = _moved_law_warnings(given, moved, [rec])
+        assert bool(w) == warned, w
+        assert not _moved_law_warnings(band, moved, [rec])
+    w = _moved_law_warnings(given, dataclasses.replace(given, stiffness=given.stiffness * 1.03), [rec])
+    assert w and "moved the restoring law by 3 %" in w[0] and "refine --free damping" in w[0]

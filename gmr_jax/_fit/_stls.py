@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from .._errors import GMRInputError
 from .._solution import RESULTS, Solution, error_if_failed
 from ._householder import back_substitute, householder_qr, inverse
 
@@ -212,11 +213,30 @@ def stls(
         >>> sol.stats["support"].tolist()
         [False, True, False, True]
     """
+    _check_shapes(theta, y, weights)
     qr = compress(theta, y, weights)
     sol = stls_qr(qr, solver)
     cov = coefficient_covariance(qr, sol.value, sol.stats["support"])
     sol = eqx.tree_at(lambda s: s.aux, sol, cov, is_leaf=lambda x: x is None)
     return error_if_failed(sol, throw)
+
+
+def _check_shapes(theta, y, weights) -> None:
+    """Shapes are static under jit and vmap: a mistake is a `GMRInputError` at the call, not a
+    traceback from inside JAX (audit: pysindy's (n, 1) target and a transposed library were)."""
+    t, v = jnp.shape(theta), jnp.shape(y)
+    if len(t) != 2:
+        raise GMRInputError(f"stls: theta must be the library matrix (samples, terms), got shape {t}")
+    if len(v) == 2 and v[1] == 1:
+        raise GMRInputError(f"stls: y has shape {v}; give one target as (samples,), y[:, 0] (pysindy's (n, 1) "
+                            f"convention), or vmap over several")
+    if len(v) != 1:
+        raise GMRInputError(f"stls: y must be one target (samples,), got shape {v}; vmap over several targets")
+    if v[0] != t[0]:
+        hint = " (theta looks transposed: pass theta.T)" if t[1] == v[0] else ""
+        raise GMRInputError(f"stls: theta has {t[0]} rows (samples) but y has {v[0]} samples{hint}")
+    if weights is not None and jnp.shape(weights) != v:
+        raise GMRInputError(f"stls: weights must be one per sample {v}, got shape {jnp.shape(weights)}")
 
 
 def n_active(sol: Solution) -> Int[Array, ""]:

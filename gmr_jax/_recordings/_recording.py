@@ -55,6 +55,9 @@ class Recording:
 
     def __post_init__(self):
         _check_fields(self)
+        for key in SIGNALS:  # lists and tuples of numbers (a notebook's data) as arrays
+            if isinstance(getattr(self, key), (list, tuple)):
+                object.__setattr__(self, key, np.asarray(getattr(self, key), float))
         for key in ("x", "v", "a", "force"):  # one DOF may be given as (N,)
             val = getattr(self, key)
             if val is not None and np.ndim(val) == 1:

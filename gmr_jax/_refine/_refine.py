@@ -335,7 +335,7 @@ def refine(
         "train": errs(recordings),
         "holdout": errs(holdout) if holdout is not None else None,
     }
-    stats["warnings"] = _holdout_warnings(stats["holdout"])
+    stats["warnings"] = _holdout_warnings(stats["holdout"]) + _moved_law_warnings(model, refined, recordings)
     for w in stats["warnings"]:
         warnings.warn(w, GMRDataWarning, stacklevel=2)
     return raise_if_failed(Solution(value=refined, result=result, stats=stats), throw, "refine")
@@ -357,6 +357,41 @@ def _holdout_warnings(holdout) -> list[str]:
     return [(f"the refined model is worse than the given one on the holdout (windowed output NRMSE {b.nrmse:.4g} -> "
              f"{a.nrmse:.4g}, failed windows {b.failed} -> {a.failed} of {a.windows}): it fitted the training "
              f"records only; keep the given model, or refine on records that cover the motion the holdout has")]
+
+
+#: `refine` warns where it moved a DOF's restoring law (RMS over the recorded range) by more than this many times
+#: the given model's band there, and by more than `MOVED_MIN` of the law's RMS
+MOVED_FACTOR, MOVED_MIN = 2.0, 0.002
+
+
+def _moved_law_warnings(model: GlobalModel, refined: GlobalModel, recordings) -> list[str]:
+    """The refinement moved a restoring law further than the given model's band (its covariance, from the local
+    fits) allows over the recorded range: the free stiffness terms absorbed what the model lacks elsewhere (a
+    tri-stable law fitted to 0.007 %, a v^3 damping term missing: refined with every term free, 0.96 % off, while
+    `free="damping"` kept it and did as well on the holdout)."""
+    from .._reconstruct._sanity import restoring_uncertainty
+
+    if model.covariance is None:
+        return []
+    recs = [recordings] if not isinstance(recordings, (list, tuple)) else list(recordings)
+    x = np.concatenate([np.asarray(r.x, float).reshape(len(r.t), -1) for r in recs])
+    out = []
+    for i in range(model.n_dof):
+        lo, hi = float(x[:, i].min()), float(x[:, i].max())
+        k0, k1 = np.asarray(model.stiffness[i], float), np.asarray(refined.stiffness[i], float)
+        if not hi > lo or np.array_equal(k0, k1):
+            continue
+        xs = np.linspace(lo, hi, 201)
+        f0 = np.polynomial.polynomial.polyval(xs, k0)
+        moved = float(np.linalg.norm(np.polynomial.polynomial.polyval(xs, k1) - f0) / max(np.linalg.norm(f0), 1e-300))
+        band = restoring_uncertainty(k0, np.asarray(model.covariance[i]), lo, hi)
+        if moved > max(MOVED_FACTOR * band, MOVED_MIN):
+            out.append(f"DOF {i}: the refinement moved the restoring law by {100 * moved:.3g} % (RMS over the recorded "
+                       f"range [{lo:.4g}, {hi:.4g}]), {moved / max(band, 1e-300):.3g} x the given model's band "
+                       f"(±{100 * band:.2g} %, from the local fits): the free stiffness terms absorbed something else "
+                       f"(a term the model lacks, e.g. in the damping); refine fewer terms (free='damping', gmr "
+                       f"refine --free damping) or look for the missing one (gmr discover)")
+    return out
 
 
 def _free_terms(problem: ShootingProblem) -> list[tuple[int, str, int]]:
