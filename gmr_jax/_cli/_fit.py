@@ -6,7 +6,6 @@ recorded in the model file under "warnings", and the exit status stays 0 (3 with
 """
 
 import argparse
-import json
 import sys
 import warnings
 from pathlib import Path
@@ -14,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import GMRInputError
+from .._model._metadata import fit_metadata
 from .._reconstruct._sanity import GMRDataWarning
 from ._args import add_columns_option, load_recordings, output_file, positive_int
 from ._progress import stage
@@ -67,49 +67,6 @@ def register(sub):
                    "its warnings are still written); without it warnings are printed and the status is 0")
     f.set_defaults(fn=run)
     return f
-
-
-def data_range(recs):
-    """[min, max] of each DOF's displacement over the training recordings: the region where the
-    model was fitted (`gmr basins`/`actuate` look for wells there when no --x-range is given)."""
-    x = np.concatenate([np.asarray(r.x) for r in recs])
-    return [[float(x[:, i].min()), float(x[:, i].max())] for i in range(x.shape[1])]
-
-
-def speed_range(recs):
-    """[min, max] of each DOF's velocity over the training recordings (v as recorded, or the central difference
-    of x where it was not): the speeds the damping law was fitted at (`gmr basins` says when crossing a barrier
-    takes much more)."""
-    v = np.concatenate([np.asarray(r.v) if r.v is not None else np.gradient(np.asarray(r.x), r.dt, axis=0)
-                        for r in recs])
-    return [[float(v[:, i].min()), float(v[:, i].max())] for i in range(v.shape[1])]
-
-
-def shared_design_of(stats: dict) -> list[dict]:
-    """Per DOF, `reconstruct`'s `stats["shared_design"]` (JSON-ready), or [] where the fit had none
-    (a single DOF, GMC-SINDy, or sharing off)."""
-    rows = [rep.stats.get("shared_design") for rep in stats.get("dofs", [])]
-    if not rows or not any(isinstance(r, dict) and "tau" in r for r in rows):
-        return []
-    return [json.loads(json.dumps(r, default=float)) if isinstance(r, dict) else {} for r in rows]
-
-
-def coordination_of(stats: dict) -> list[dict]:
-    """Per DOF, the coordination route `reconstruct` took (auto: "gls", "joint", "gls + joint
-    damping") and its notes (why the paper's route was replaced or kept, or its degree changed),
-    JSON-ready; [] where the fit has none (GMC-SINDy)."""
-    rows = []
-    for rep in stats.get("dofs", []):
-        route = rep.stats.get("coordination") if isinstance(rep.stats, dict) else None
-        if route is None:
-            return []
-        row = {"route": str(route), "notes": [str(n) for n in rep.stats.get("paper_route_rejected", [])]}
-        if any(rep.stats.get("errors_in_variables") or []):
-            row["errors_in_variables"] = rep.stats["errors_in_variables"]
-        if any(w and w.get("applied") for w in rep.stats.get("velocity_noise") or []):
-            row["velocity_noise"] = rep.stats["velocity_noise"]
-        rows.append(row)
-    return rows
 
 
 def figure_path(out: str, figure: str | None) -> Path:
@@ -166,18 +123,12 @@ def run(args) -> int:
         sol = fn(recs, lib, topology=args.topology, masses=masses, **kwargs)
     model, st = sol.value, sol.stats
     stage(f"writing {args.out}")
-    extra = {"resolution": st["resolution"].to_dict()} if "resolution" in st else {}  # gmr show prints it
-    design = shared_design_of(st)
-    if design:
-        extra["shared_design"] = design
-    routes = coordination_of(st)
-    if routes:
-        extra["coordination"] = routes
-    ranges = data_range(recs)  # the fitted region, written with the model and its band printed over it
-    gmr.save_model(model, args.out, method=st["method"],
-                   library={"r": lib.restoring_order, "d": lib.damping_order}, training=st["training"],
-                   warnings=load_warnings + list(st["warnings"]), data_range=ranges, speed_range=speed_range(recs),
-                   **extra)
+    # the file: what save_model(solution) writes (the fitted region from the completed recordings: an
+    # acceleration-only chain's cell deformations, not the loaded mass displacements), the loading warnings first
+    meta = fit_metadata(st)
+    meta["warnings"] = load_warnings + list(st["warnings"])
+    gmr.save_model(model, args.out, **meta)
+    ranges, routes, design = meta["data_range"], meta.get("coordination", []), meta.get("shared_design", [])
     print(f"{st['method']} model from {len(recs)} recording(s) -> {args.out}")
     for line in _term_table(model, {"terms": model.terms()}, 4):  # equations, coefficients, std. errors
         print(line)

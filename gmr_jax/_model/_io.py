@@ -64,23 +64,17 @@ def save_model(model, path, **extra) -> None:
     """Write `model` as "gmr-model/1" JSON (coefficients as exact float reprs).
 
     `model`: a `GlobalModel`, or the `Solution` that `reconstruct` / `gmc_sindy` returned: then
-    the file also carries what `gmr fit` writes with it, the method, the library orders, the
-    training R² and NRMSE and the warnings (`gmr show` prints them). `extra`: further top-level
+    the file also carries what `gmr fit` writes with it (`_metadata.fit_metadata`): the method,
+    the library orders, the training R² and NRMSE, the warnings, the data and speed ranges, the
+    resolution report and the coordination route (`gmr show` prints them; `gmr basins` and
+    `gmr actuate` read the ranges). `extra`: further top-level
     keys (they override those)."""
     from .._solution import Solution
 
     if isinstance(model, Solution):
-        st = model.stats if isinstance(model.stats, dict) else {}
-        meta = {}
-        if "method" in st:
-            meta["method"] = st["method"]
-        lib = st.get("library")
-        if lib is not None and hasattr(lib, "restoring_order"):
-            meta["library"] = {"r": lib.restoring_order, "d": lib.damping_order}
-        for key in ("training", "warnings"):
-            if key in st:
-                meta[key] = list(st[key]) if key == "warnings" else st[key]
-        model, extra = model.value, meta | extra
+        from ._metadata import fit_metadata
+
+        model, extra = model.value, fit_metadata(model.stats if isinstance(model.stats, dict) else {}) | extra
     if not isinstance(model, GlobalModel):
         raise GMRInputError(f"save_model writes a GlobalModel (or the Solution of reconstruct), got "
                             f"{type(model).__name__}")

@@ -240,9 +240,12 @@ class _Failure:
             self.code, self.detail = code, detail
 
 
-def _solution(model, failure: _Failure, method, library, reports, training, warnings) -> Solution:
+def _solution(model, failure: _Failure, method, library, reports, training, warnings, recs) -> Solution:
+    from .._model._metadata import ranges
+
     stats = {"method": method, "library": library, "dofs": reports, "training": training,
-             "warnings": warnings, "failure": failure.detail}
+             "warnings": warnings, "failure": failure.detail,
+             "data_range": ranges(recs, "x"), "speed_range": ranges(recs, "v")}
     return Solution(value=model, result=failure.code, stats=stats)
 
 
@@ -1151,7 +1154,7 @@ def reconstruct(
                                                masses, topology, noises)  # what each well resolved, excitation advice
     warnings += resolution.warnings()
     _emit(warnings)
-    sol = _solution(model, failure, "GMR", library, reports, training, warnings)
+    sol = _solution(model, failure, "GMR", library, reports, training, warnings, recs)
     sol.stats["resolution"] = resolution
     return sol
 
@@ -1215,4 +1218,4 @@ def gmc_sindy(
     training = training_scores(model, recs, masses, topology)
     warnings += _sanity.check_fit_quality(training)
     _emit(warnings)
-    return _solution(model, failure, "GMC-SINDy", library, reports, training, warnings)
+    return _solution(model, failure, "GMC-SINDy", library, reports, training, warnings, recs)
