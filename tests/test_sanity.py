@@ -200,6 +200,12 @@ def test_13_columns_in_other_units_are_reported(nes):
     assert "opposite sign" in _sanity.check_units("nes_S1", cases["v reversed"][0], topo)[0]
     _, msgs = _fit([cases["a in g"][0], *recs[1:]])
     assert _has(msgs, "nes_S1: the measured relative acceleration", "accelerations in g")
+    # an accelerometer mounted reversed (a = -(x'' + b)): a - b is not x'' where b is large, but -a - b is
+    # (audit: reported only as records leaving their wells)
+    flipped = dataclasses.replace(r, a=-r.a)
+    msgs = _sanity.check_units("nes_S1", flipped, topo)
+    assert abs(np.corrcoef(-r.a[:, 0] - r.base_acc, r.a[:, 0] - r.base_acc)[0, 1]) < 0.9  # plain check: no verdict
+    assert len(msgs) == 1 and "acceleration of DOF 0 has the opposite sign" in msgs[0], msgs
 
 
 def test_5_different_masses_are_refused(nes):

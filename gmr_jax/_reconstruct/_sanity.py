@@ -298,6 +298,12 @@ def check_units(name: str, rec, topology) -> list[str]:
                 continue
             r = dm / np.sqrt(dd * mm)
             if abs(r) < UNITS_MIN_CORR:
+                if (key == "a" and rec.base_acc is not None and (topology.name != "chain" or x.shape[1] == 1)
+                        and _reversed_accelerometer(d, meas[:, i] + 2 * b, dt, w)):
+                    out.append(f"{name}: the measured acceleration of DOF {i} has the opposite sign: -a minus the "
+                               f"base acceleration is the second derivative of its x, a minus it is not (correlation "
+                               f"{abs(r):.3f}): an accelerometer mounted or wired reversed; flip it (e.g. --columns "
+                               f"'a=-COLUMN'), or the fit takes the input as pushing the wrong way")
                 continue
             lo, hi = sorted((dm / dd, mm / dm), key=abs)
             if r > 0 and not (abs(lo) > UNITS_FACTOR or abs(hi) < 1 / UNITS_FACTOR):
@@ -315,6 +321,20 @@ def check_units(name: str, rec, topology) -> list[str]:
                 f"(e.g. --columns '{key}=COLUMN*FACTOR')"
             )
     return _time_unit(name, out, scales)
+
+
+def _reversed_accelerometer(d, flipped_rel, dt, w) -> bool:
+    """-(a) - b (`flipped_rel` = a + b, negated here) matches x'' `d` in scale within `UNITS_FACTOR` at a
+    correlation of at least `UNITS_MIN_CORR` (audit: a reversed accelerometer, a = -(x'' + b), was reported as
+    records leaving their wells: a - b does not correlate with x'' where b is large)."""
+    from .._recordings._derivatives import differentiate
+
+    m = -differentiate(flipped_rel, dt, 0, w)
+    dd, dm, mm = float(d @ d), float(d @ m), float(m @ m)
+    if dd <= 0 or mm <= 0 or dm / np.sqrt(dd * mm) < UNITS_MIN_CORR:
+        return False
+    lo, hi = sorted((dm / dd, mm / dm), key=abs)
+    return abs(lo) <= UNITS_FACTOR and abs(hi) >= 1 / UNITS_FACTOR
 
 
 def _time_unit(name: str, out: list[str], scales: dict) -> list[str]:
