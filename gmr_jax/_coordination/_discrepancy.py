@@ -20,10 +20,8 @@ magnet), whose error between the wells can be far larger than the noise. Two ter
   gave. The vectors d_i = P - P_i enter as sum_i d_i d_i' (rank n, a Gaussian on the
   coefficients, so files, bands and samples carry it): zero at the wells to the order the data
   fix there, widest between and beyond them, where no datum is. For a weighted fit of degree
-  K' < K (the data accept a lower degree), the next fits of degree K' + 1 and K' + 2 give one d
-  each: the next degree alone has one parity, and an error of the other (odd between three
-  wells about a middle one) escaped it (a sin law: band 2-3 x too narrow, 42 % coverage; 100 %
-  with both).
+  K' < K (the data accept a lower degree), the next fit of degree K' + 1 gives one d (one
+  parity: an odd error between three wells escapes an even next term; `NEXT_DEGREES`).
 
 Both terms are statistics of the local data, not constants tuned to a study. The joint route's
 posterior covariance sigma^2 A^-1 already holds its smoothness prior (wide where the data are
@@ -49,8 +47,13 @@ _system = disk_traced(weighted_system)
 _wfit = disk_traced(weighted_fit)
 
 
-#: the weighted fit's embedded error: its differences from the fits this many degrees above it (both parities)
-NEXT_DEGREES = 2
+#: the weighted fit's embedded error: its differences from the fits this many degrees above it. 1: the next degree
+#: only, of one parity. 2 (both parities) holds an odd error between three wells that the next even term misses (a
+#: sin tri-stable law at 40 dB: coverage 42 -> 100 %, band ±11 % for a 4 % error) but the fit two degrees up is
+#: often the exact interpolant through noisy high-order conditions, and its difference is noise: the 3-cell Kresling
+#: stress case at the advised amplitude went from a ±73 % band to ±4800 % (error 1.7 %). Left at 1 until the
+#: difference is weighed against its own noise (tests/test_uncertainty.py, the strict xfail)
+NEXT_DEGREES = 1
 
 
 def _chosen_and_vectors(nodes, taylor, order, cov, method: str, alpha: float, confining: bool = False,

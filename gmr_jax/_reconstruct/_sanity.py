@@ -522,8 +522,10 @@ def check_band(dof: int, stiffness, calibrated, noise: float, x_lo: float, x_hi:
             f"{_g(x_hi)}]), against ±{100 * noise:.2g} % from the data's noise alone (the printed standard "
             f"errors): laws that differ that much between the wells fit the wells' data, so treat the force "
             f"between them, the saddle and the barriers as uncertain to that extent (the band is built to "
-            f"cover: on the built-in stress cases it is 6-60 x the actual error); the fit figure draws it; "
-            f"records that reach further from each well (larger or broadband excitation) narrow it"]
+            f"cover: on the built-in stress cases it is 6-60 x the actual error); the fit figure draws it and "
+            f"gmr show gives the barriers' range. Data between the wells narrow it (a record that crosses, "
+            f"refined with gmr refine --free stiffness); larger vibrations about the wells may not (a tanh law "
+            f"from accelerations: ±260 % at 1, 3 and 5 x the amplitude)"]
 
 
 def restoring_uncertainty(stiffness, covariance, x_lo: float, x_hi: float) -> float:
