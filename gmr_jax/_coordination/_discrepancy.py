@@ -20,9 +20,8 @@ magnet), whose error between the wells can be far larger than the noise. Two ter
   gave. The vectors d_i = P - P_i enter as sum_i d_i d_i' (rank n, a Gaussian on the
   coefficients, so files, bands and samples carry it): zero at the wells to the order the data
   fix there, widest between and beyond them, where no datum is. For a weighted fit of degree
-  K' < K (the data accept a lower degree), the next fit of degree K' + 1 gives one d, and the
-  fit of degree K' + 2 another (the other parity: an odd error between three wells escapes an
-  even next term), weighed by the share of it that stands above its own noise (`_signal_share`).
+  K' < K (the data accept a lower degree), the next fit of degree K' + 1 gives one d (one
+  parity: an odd error between three wells escapes an even next term; `NEXT_DEGREES`).
 
 Both terms are statistics of the local data, not constants tuned to a study. The joint route's
 posterior covariance sigma^2 A^-1 already holds its smoothness prior (wide where the data are
@@ -48,29 +47,15 @@ _system = disk_traced(weighted_system)
 _wfit = disk_traced(weighted_fit)
 
 
-def _signal_share(a_w: np.ndarray, b_w: np.ndarray, k0: int, k1: int) -> float:
-    """How much of the difference between the whitened system's fits of degree `k1` and `k0` is more than their
-    noise: with d = (G1 - G0) b (G_k the least-squares map of degree k) and its noise covariance
-    S = (G1 - G0)(G1 - G0)' (unit whitened noise), s2 = d' S^+ d / rank S (about 1 for a difference that is noise
-    alone), the share max(0, 1 - 1 / s2). The fit two degrees up holds an error of the other parity (odd between
-    three wells about a middle one) that the next degree's term misses, but is often the exact interpolant through
-    noisy high-order conditions: taken whole, the 3-cell Kresling stress case's band went from ±73 % to ±4800 %;
-    a sin tri-stable law's odd error (band coverage 42 %) is far above its noise."""
-    size = a_w.shape[1]
-
-    def fit_map(k):
-        g = np.zeros((size, a_w.shape[0]))
-        g[: k + 1] = np.linalg.pinv(a_w[:, : k + 1])
-        return g
-
-    diff = fit_map(k1) - fit_map(k0)
-    d = diff @ b_w
-    cov = diff @ diff.T
-    rank = np.linalg.matrix_rank(cov)
-    if rank == 0:
-        return 0.0
-    s2 = float(d @ np.linalg.pinv(cov, hermitian=True) @ d) / rank
-    return max(0.0, 1.0 - 1.0 / s2) if s2 > 0 else 0.0
+#: the weighted fit's embedded error: its differences from the fits this many degrees above it. 1: the next degree
+#: only, of one parity. 2 (both parities) holds an odd error between three wells that the next even term misses (a
+#: sin tri-stable law at 40 dB: coverage 42 -> 100 %, band ±11 % for a 4 % error) but the fit two degrees up is
+#: often the exact interpolant through noisy high-order conditions, and its difference is noise: the 3-cell Kresling
+#: stress case at the advised amplitude went from a ±73 % band to ±4800 % (error 1.7 %). Weighed by the share of
+#: it above its own noise, it held the audit's realization (weight 0.56, 100 %) but not another of the same law
+#: (weight 0: the degree-11 interpolant is within noise of the degree-9 fit, and both miss the truth; 13 %): the
+#: error there is beyond degree 11, not in the other parity. Left at 1 (tests/test_uncertainty.py, strict xfail)
+NEXT_DEGREES = 1
 
 
 def _chosen_and_vectors(nodes, taylor, order, cov, method: str, alpha: float, confining: bool = False,
@@ -90,12 +75,8 @@ def _chosen_and_vectors(nodes, taylor, order, cov, method: str, alpha: float, co
         to_monomials = monomial_map(float(c), float(h), size)
         # the next fit of each parity: an error of the other parity (odd between symmetric wells) is not in the
         # next degree's term alone (audit: a sin law's odd error between three wells, band 2-3 x too narrow)
-        vectors = [to_monomials @ np.asarray(_wfit(a_w, b_w, degree + 1)[0]) - np.asarray(coef)]
-        if degree + 2 <= k_herm:  # the other parity, weighed against its own noise
-            w = _signal_share(np.asarray(a_w), np.asarray(b_w), degree, degree + 2)
-            if w > 0:
-                far = to_monomials @ np.asarray(_wfit(a_w, b_w, degree + 2)[0]) - np.asarray(coef)
-                vectors.append(np.sqrt(w) * far)
+        vectors = [to_monomials @ np.asarray(_wfit(a_w, b_w, k)[0]) - np.asarray(coef)
+                   for k in range(degree + 1, min(degree + NEXT_DEGREES, k_herm) + 1)]
         dof = float(stats["dof"])
         birge = max(1.0, float(stats["chi2"]) / dof) if dof > 0 else 1.0
         return vectors, birge
