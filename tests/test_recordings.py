@@ -535,6 +535,8 @@ def test_lists_are_taken_as_arrays():
         np.testing.assert_array_equal(getattr(r, k), getattr(ref, k))
     with pytest.raises(g.GMRInputError, match="not a rectangular array"):
         g.Recording(t=list(t), x=[[1.0, 2.0], [3.0]], base_acc=list(b))
+    ints = g.Recording(t=list(range(200)), x=list(x), base_acc=list(b), masses=[2])  # Python ints, as floats
+    assert ints.t.dtype == float and ints.masses.tolist() == [2.0]
 
 
 def test_labelled_units_are_made_coherent(tmp_path):

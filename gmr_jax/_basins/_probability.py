@@ -19,7 +19,8 @@ from ._wells import stable_wells
 
 
 class BasinProbability(eqx.Module):
-    """`configs` (c,): the configurations met (bit fields as `BasinMap.config`; -1: not settled
+    """`configs` (c,): the configurations met (codes as `BasinMap.config`: bit fields for
+    bistable cells, base-K digits with K wells; -1: not settled
     or failed), ascending; `probability` (NA, NF, c): per grid point, the share of the used
     samples that ended in each; `most_likely` (NA, NF): the configuration of highest
     probability; `confidence` (NA, NF): its probability; `mean_config` (NA, NF): the

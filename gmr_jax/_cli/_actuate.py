@@ -6,7 +6,7 @@ import json
 import numpy as np
 
 from .._errors import GMRInputError
-from ._args import find_wells, interval, output_dir, positive_float, positive_int
+from ._args import draw_box, find_wells, interval, output_dir, positive_float, positive_int
 from ._progress import stage
 
 
@@ -123,13 +123,13 @@ def _robustness(gmr, model, act, wells, settings, target: int, args) -> dict:
     design 'verified (reached)' on the model needed 11-30 % more on the truth)."""
     import jax
 
+    from ..plots._basins import well_base
+
     if getattr(model, "covariance", None) is None:
         return {"sentence": f"note: {args.model} has no covariance: the design is verified on the model only, at its "
                             f"basin boundary (a structure slightly off the model may not deploy); give it a margin",
                 "draws": 0}
-    lo, hi = np.nanmin(wells, axis=1), np.nanmax(wells, axis=1)
-    half = 0.5 * np.where(hi > lo, hi - lo, np.maximum(np.abs(hi), 1.0))
-    box = np.stack([lo - half, hi + half], 1)
+    box = draw_box(wells)
     amps = float(act.A) * np.asarray(LADDER)
     stage(f"trying the design on {args.draws} models drawn from the covariance")
     sol = gmr.basin_probability(model, np.array([float(act.f)]), amps, jax.random.key(0), args.draws, x_range=box,
@@ -143,6 +143,9 @@ def _robustness(gmr, model, act, wells, settings, target: int, args) -> dict:
                             f"the design is; it is verified on the model only, at its basin boundary"}
     configs = np.asarray(bp.configs).tolist()
     prob = np.asarray(bp.probability)[:, 0, :]  # (amplitudes, configs)
+    # the sweep's codes are digits in base K (the well slots of the model in the box): the target's bits there
+    base = well_base(gmr.stable_wells(model, box))
+    target = sum(((target >> i) & 1) * base**i for i in range(model.n_dof))
     share = prob[:, configs.index(target)] if target in configs else np.zeros(len(amps))
     ok = np.nonzero(share >= ROBUST_SHARE)[0]
     a95 = float(amps[ok[0]]) if ok.size else None

@@ -191,6 +191,14 @@ def find_wells(model, spec, model_path=None):
     return wells, how
 
 
+def draw_box(wells) -> np.ndarray:
+    """(dof, 2) where the wells of models drawn from a covariance are searched (`basin_probability`): the span of
+    the model's own wells widened by half of it on each side (as `find_wells` widens the data range)."""
+    lo, hi = np.nanmin(wells, axis=1), np.nanmax(wells, axis=1)
+    half = 0.5 * np.where(hi > lo, hi - lo, np.maximum(np.abs(hi), 1.0))
+    return np.stack([lo - half, hi + half], 1)
+
+
 def start_configuration(spec, wells):
     """x0 from a configuration label like 0-1-1-0-0 (cell 0 first; a digit = that cell's well)."""
     if spec is None:

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._args import (find_wells, grid, output_dir, positive_float, positive_int, recorded_range, start_configuration,
+from ._args import (draw_box, find_wells, grid, output_dir, positive_float, positive_int, recorded_range, start_configuration,
                     tolerance)
 from ._progress import stage
 
@@ -81,9 +81,7 @@ def _probability(gmr, model, args, f, A, x0, settings, out, wells) -> None:
     if model.covariance is None:
         raise GMRInputError(f"--draws: {args.model} has no covariance (a model written by gmr fit has one); "
                             f"drop --draws to map the model itself")
-    lo, hi = np.nanmin(wells, axis=1), np.nanmax(wells, axis=1)
-    half = 0.5 * np.where(hi > lo, hi - lo, np.maximum(np.abs(hi), 1.0))
-    box = np.stack([lo - half, hi + half], 1)
+    box = draw_box(wells)
     stage(f"sweeping {args.draws} models drawn from the covariance")
     sol = gmr.basin_probability(model, f, A, jax.random.key(0), args.draws, x_range=box, x0=x0, settings=settings,
                                 chunk=args.chunk)
@@ -200,7 +198,7 @@ SPEED_FACTOR = 2.0
 def _beyond_speed(model, model_path, wells, x0) -> str | None:
     """Where crossing a barrier takes speeds the damping law was not fitted at: from each DOF's start well, the
     lowest barrier dV of the model's restoring law to a neighbouring well gives the speed sqrt(2 dV / m) a
-    crossing needs at the least; above `SPEED_FACTOR` times the fastest recorded speed (the model file's
+    crossing needs at the least (m the mass the DOF's deformation moves: for a chain cell, every mass it carries); above `SPEED_FACTOR` times the fastest recorded speed (the model file's
     `speed_range`), the damping there is the local law extrapolated. Small vibrations do not show terms that act
     at speed (v^3, v|v|, x^2 v far from the wells), and the file's band does not include them (audit: a v^3 term
     left out, the damping at crossing speeds 2.6 x low with a ±0.3 % band, 70 % basin agreement). A sentence, or
@@ -212,7 +210,8 @@ def _beyond_speed(model, model_path, wells, x0) -> str | None:
     if vr is None:
         return None
     vmax = np.max(np.abs(vr), axis=1)
-    masses = np.asarray(model.masses, float)
+    # the mass a cell's deformation moves: every mass it carries (a chain: itself and the masses above it)
+    masses = np.asarray(model.topology.carried(np.asarray(model.masses, float)[None, :]))[0]
     eqs = equilibria(model.stiffness)
     worst = None
     for i, rows in enumerate(barriers(model.stiffness, eqs)):

@@ -148,12 +148,13 @@ def barrier_intervals(model, bars, n: int = BARRIER_DRAWS, seed: int = 0):
     out = []
     for i, rows in enumerate(bars):
         eqs = equilibria(draws[:, i, :])
+        drawn = [barriers([c], [zs])[0] for c, zs in zip(draws[:, i, :], eqs)]
         found = []
         for b in rows:
             width = b["right"] - b["left"]
             vals = []
-            for c, zs in zip(draws[:, i, :], eqs):
-                got = [r for r in barriers([c], [zs])[0]
+            for bars_k in drawn:
+                got = [r for r in bars_k
                        if abs(r["saddle"] - b["saddle"]) < 0.5 * width and abs(r["left"] - b["left"]) < 0.5 * width
                        and abs(r["right"] - b["right"]) < 0.5 * width]
                 if got:
@@ -161,7 +162,7 @@ def barrier_intervals(model, bars, n: int = BARRIER_DRAWS, seed: int = 0):
                     vals.append((r["saddle"], r["from_left"], r["from_right"]))
             v = np.asarray(vals, float).reshape(-1, 3)
             q = np.percentile(v, [2.5, 97.5], axis=0) if len(v) else np.full((2, 3), np.nan)
-            found.append({"kept": len(v) / n, "saddle": q[:, 0], "from_left": q[:, 1], "from_right": q[:, 2]})
+            found.append({"kept": len(v) / n, "draws": n, "saddle": q[:, 0], "from_left": q[:, 1], "from_right": q[:, 2]})
         out.append(found)
     return out
 
@@ -169,7 +170,7 @@ def barrier_intervals(model, bars, n: int = BARRIER_DRAWS, seed: int = 0):
 def _interval_line(s: dict, p: int) -> str:
     rng = lambda a: f"[{_g(a[0], p)}, {_g(a[1], p)}]"  # noqa: E731
     if s["kept"] == 0:
-        return (f"(none of {BARRIER_DRAWS} models drawn from the file's covariance keeps these two wells and the saddle: "
+        return (f"(none of {s['draws']} models drawn from the file's covariance keeps these two wells and the saddle: "
                 f"the data do not fix this barrier)")
     return (f"(95 % of the models drawn from the file's covariance: saddle {rng(s['saddle'])}, from the left "
             f"{rng(s['from_left'])}, from the right {rng(s['from_right'])}; "

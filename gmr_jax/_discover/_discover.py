@@ -110,6 +110,15 @@ CUTOFF_OVER_BAND = 3.0
 INPUT_NOISE_SHARE = 1e-6
 
 
+def carries_noise(u: np.ndarray, dt: float) -> bool:
+    """Whether an input column is filtered by `smooth_input`: it varies, its white noise holds at least
+    `INPUT_NOISE_SHARE` of its power, and its cut-off lies below 0.45 / dt."""
+    u = np.asarray(u, float)
+    if np.std(u) == 0 or white_share(u, dt) < INPUT_NOISE_SHARE:
+        return False
+    return 0 < CUTOFF_OVER_BAND * band_edge(u, dt) < 0.45 / dt
+
+
 def white_share(u: np.ndarray, dt: float) -> float:
     """Share of the power of u (mean removed) held by its white noise floor: the periodogram's median
     over the top fifth of the band, / ln 2 (`band_edge`'s floor), over every bin."""
@@ -127,15 +136,15 @@ def smooth_input(u: np.ndarray, dt: float) -> np.ndarray:
     noise on the input would otherwise drive the simulated resonances. The record is padded (odd
     extension) by three periods of the cut-off, so the filter's start-up transient stays outside it
     (scipy's default of 15 samples left the last seconds of a 0.25 Hz sine at 100 Hz up to 97 % off).
-    Columns that are zero stay zero; so does a column without measurable white noise (`white_share`
-    below `INPUT_NOISE_SHARE`), which the filter could only change.
+    Columns that are zero stay zero; a column without measurable white noise (`carries_noise`) is
+    returned unchanged, which the filter could only change.
     """
     u = np.asarray(u, float)
     if u.ndim == 1:
         return smooth_input(u[:, None], dt)[:, 0]
     out = u.copy()
     for k in range(u.shape[1]):
-        if np.std(u[:, k]) == 0 or white_share(u[:, k], dt) < INPUT_NOISE_SHARE:
+        if not carries_noise(u[:, k], dt):
             continue
         fc = CUTOFF_OVER_BAND * band_edge(u[:, k], dt)
         if 0 < fc < 0.45 / dt:

@@ -54,10 +54,13 @@ class Recording:
     derivation: dict | None = field(default=None, compare=False)
 
     def __post_init__(self):
-        _check_fields(self)
-        for key in SIGNALS:  # lists and tuples of numbers (a notebook's data) as arrays
+        for key in SIGNALS:  # lists and tuples of numbers (a notebook's data, ints included) as float arrays
             if isinstance(getattr(self, key), (list, tuple)):
-                object.__setattr__(self, key, np.asarray(getattr(self, key), float))
+                try:
+                    object.__setattr__(self, key, np.asarray(getattr(self, key), float))
+                except (TypeError, ValueError):
+                    pass  # ragged or not numbers: `_check_fields` names it
+        _check_fields(self)
         for key in ("x", "v", "a", "force"):  # one DOF may be given as (N,)
             val = getattr(self, key)
             if val is not None and np.ndim(val) == 1:

@@ -29,12 +29,6 @@ class RefineSettings(eqx.Module):
     **Attributes:**
 
     - `window`: shooting window length in seconds.
-    - `starts`: what each window starts from. "estimated" (default): the state (x0, v0) that fits
-      the window's measured x best under the current coefficients (`fit_starts`; the
-      coefficients' Jacobian is projected off the start states', variable projection); a noisy
-      x0, or a v0 estimated from a noisy x, no longer bends the coefficients. "measured": the
-      recorded (x, v) at its first sample (v estimated from x when not recorded); cheaper, and
-      as good where x and v are clean.
     - `solver`: an optimistix least-squares solver (Levenberg-Marquardt by default; e.g.
       `optx.GaussNewton(rtol, atol)` also works).
     - `max_iterations`: maximum least-squares solver iterations (optimistix's `max_steps`).
@@ -50,10 +44,15 @@ class RefineSettings(eqx.Module):
     - `integrator`: ODE tolerances and the per-window `max_steps`.
     - `box_ranges`: divergence box of a window: the recording's range of x widened by
       `box_ranges` times that range on each side; a window that leaves it counts as diverged.
+    - `starts`: what each window starts from. "estimated" (default): the state (x0, v0) that fits
+      the window's measured x best under the current coefficients (`fit_starts`; the
+      coefficients' Jacobian is projected off the start states', variable projection); a noisy
+      x0, or a v0 estimated from a noisy x, no longer bends the coefficients. "measured": the
+      recorded (x, v) at its first sample (v estimated from x when not recorded); cheaper, and
+      as good where x and v are clean.
     """
 
     window: float = 1.0
-    starts: str = eqx.field(static=True, default="estimated")
     solver: optx.AbstractLeastSquaresSolver = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-8)
     max_iterations: int = eqx.field(static=True, default=50)
     stride: int = eqx.field(static=True, default=1)
@@ -62,6 +61,7 @@ class RefineSettings(eqx.Module):
     jac: str = eqx.field(static=True, default="fwd")
     integrator: Integrator = Integrator(rtol=1e-8, atol=1e-10, max_steps=20_000)
     box_ranges: float = 10.0
+    starts: str = eqx.field(static=True, default="estimated")
 
     def __check_init__(self):
         check_starts(self.starts)
@@ -142,7 +142,7 @@ class ShootingProblem(eqx.Module):
     stride: int = eqx.field(static=True)
     jac: str = eqx.field(static=True)
     integrator: Integrator
-    estimated: bool = eqx.field(static=True, default=False)
+    estimated: bool = eqx.field(static=True, default=True)
 
     def to_model(self, p: Float[Array, " free"]) -> GlobalModel:
         coef = p * self.scales
@@ -194,10 +194,10 @@ class ShootingProblem(eqx.Module):
                 return r[0], r[0]
 
             def window(wi, s):
+                if not self.estimated:  # the recorded start: no start-state columns to project off
+                    return jfn(lambda q: one((q, s), wi), has_aux=True)(p)
                 (jp, jst), r = jfn(one, has_aux=True)((p, s), wi)
-                if self.estimated:
-                    jp = jp - jst @ jnp.linalg.lstsq(jst, jp)[0]
-                return jp, r
+                return jp - jst @ jnp.linalg.lstsq(jst, jp)[0], r
 
             j, r = jax.vmap(window)(w, starts)
             rs.append(r.reshape(-1))
@@ -281,7 +281,8 @@ def refine(
     """Fit the coefficients of `model` to measured trajectories (output error, multiple shooting).
 
     Every recording is cut into windows of `settings.window` seconds; each window is simulated
-    (diffrax, Tsit5) from the measured (x, v) at its first sample under the measured inputs, and
+    (diffrax, Tsit5) under the measured inputs from its start state (by default the one that fits
+    its samples best, `settings.starts`; or the recorded (x, v) at its first sample), and
     the residuals (simulated - measured x, per DOF over the recording's std) of all windows are
     minimised by `settings.solver` (Levenberg-Marquardt) over the free coefficients, each
     scaled by its starting magnitude. Windows that fail or diverge get a constant penalty
@@ -303,7 +304,8 @@ def refine(
     `iterations`, `optimistix_result` (its message), `train` and `holdout` dicts of
     `before`/`after` `OutputError`s (exact model, windows of `settings.window`), `free`
     (the terms fitted), `cost_before`/`cost_after` (the surrogate least-squares objective),
-    `warnings` (also emitted as `GMRDataWarning`: a refined model worse on the holdout).
+    `warnings` (also emitted as `GMRDataWarning`: a refined model worse on the holdout; a restoring
+    law moved beyond the given model's band).
     """
     problem, p0, windows = shooting_problem(model, recordings, free, settings)
     r0, ok0 = _residuals(problem, p0, windows)
@@ -385,6 +387,8 @@ def _moved_law_warnings(model: GlobalModel, refined: GlobalModel, recordings) ->
         f0 = np.polynomial.polynomial.polyval(xs, k0)
         moved = float(np.linalg.norm(np.polynomial.polynomial.polyval(xs, k1) - f0) / max(np.linalg.norm(f0), 1e-300))
         band = restoring_uncertainty(k0, np.asarray(model.covariance[i]), lo, hi)
+        if band <= 0:  # no band on this DOF's law (its terms not in the covariance): nothing to compare with
+            continue
         if moved > max(MOVED_FACTOR * band, MOVED_MIN):
             out.append(f"DOF {i}: the refinement moved the restoring law by {100 * moved:.3g} % (RMS over the recorded "
                        f"range [{lo:.4g}, {hi:.4g}]), {moved / max(band, 1e-300):.3g} x the given model's band "

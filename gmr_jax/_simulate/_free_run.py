@@ -80,7 +80,7 @@ def free_run(model: AbstractMechanicalModel, recording, *, columns: dict | None 
     `diverged` (x left the box of 100 recorded spans around the recorded mean, or turned
     non-finite) or the solver's failure code; `stats["message"]` says it in words.
     """
-    from .._discover._discover import INPUT_NOISE_SHARE, SIM, sim_start, smooth_input, white_share
+    from .._discover._discover import SIM, carries_noise, sim_start, smooth_input
     from .._discover._offset import comparable, place
 
     if not isinstance(model, AbstractMechanicalModel):
@@ -95,8 +95,7 @@ def free_run(model: AbstractMechanicalModel, recording, *, columns: dict | None 
         warnings.warn(rec.free_decay_sentence("the model is run"), GMRDataWarning, stacklevel=2)
     else:
         b, f = rec.inputs()
-        noisy = any(np.std(c) > 0 and white_share(c, rec.dt) >= INPUT_NOISE_SHARE
-                    for c in np.column_stack([b, f]).T)
+        noisy = any(carries_noise(c, rec.dt) for c in np.column_stack([b, f]).T)
         notes = ["input low-passed at 3x its band edge (it carries white noise), cubic-spline interpolated" if noisy
                  else "input cubic-spline interpolated (no measurable noise on it: not filtered)"]
     if not rec.equilibrium_observed:
