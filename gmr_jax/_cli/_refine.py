@@ -32,9 +32,6 @@ def register(sub):
     return r
 
 
-_FROM = {"measured": "the recorded state", "estimated": "start states fitted to each window"}
-
-
 def run(args) -> int:
     import optimistix as optx
 
@@ -71,7 +68,7 @@ def run(args) -> int:
     for name in ("train", "holdout"):
         e = st[name]
         if e is not None:
-            print(f"  {name} NRMSE over {args.window:g} s windows from {_FROM[args.starts]}: {e['before'].nrmse:.4g} -> "
+            print(f"  {name} NRMSE over {args.window:g} s windows from the recorded state: {e['before'].nrmse:.4g} -> "
                   f"{e['after'].nrmse:.4g} (failed windows {e['before'].failed} -> {e['after'].failed} of "
                   f"{e['after'].windows})")
     if sol.result in (RESULTS.successful, RESULTS.nonlinear_max_steps_reached):
@@ -159,7 +156,7 @@ def _longer_horizons(model, recs, windowed, given=None, starts="estimated") -> t
         if worst > far or not np.isfinite(worst):  # far beyond the windows: something no coefficient covers
             both = np.isfinite(before) and before > far
             warn.append(f"{rec.name}: the refined model's output error {what} is {pct(worst)}, against "
-                        f"{100 * ref:.3g} % over the short windows, which restart at every window: "
+                        f"{100 * ref:.3g} % over the short windows, which restart from the recorded state: "
                         + (f"the given model's is {pct(before)} too: the model lacks something no free coefficient "
                            f"covers (a missing term: run gmr discover), or the record is too sensitive to follow (a "
                            f"chaotic response: compare the models over short restarts, gmr simulate)" if both else
