@@ -123,7 +123,7 @@ def _robustness(gmr, model, act, wells, settings, target: int, args) -> dict:
     design 'verified (reached)' on the model needed 11-30 % more on the truth)."""
     import jax
 
-    from ..plots._basins import well_base
+    from ..plots._basins import _digits, config_code, well_base
 
     if getattr(model, "covariance", None) is None:
         return {"sentence": f"note: {args.model} has no covariance: the design is verified on the model only, at its "
@@ -144,8 +144,7 @@ def _robustness(gmr, model, act, wells, settings, target: int, args) -> dict:
     configs = np.asarray(bp.configs).tolist()
     prob = np.asarray(bp.probability)[:, 0, :]  # (amplitudes, configs)
     # the sweep's codes are digits in base K (the well slots of the model in the box): the target's bits there
-    base = well_base(gmr.stable_wells(model, box))
-    target = sum(((target >> i) & 1) * base**i for i in range(model.n_dof))
+    target = config_code(_digits(target, model.n_dof, 2), well_base(gmr.stable_wells(model, box)))
     share = prob[:, configs.index(target)] if target in configs else np.zeros(len(amps))
     ok = np.nonzero(share >= ROBUST_SHARE)[0]
     a95 = float(amps[ok[0]]) if ok.size else None

@@ -216,9 +216,9 @@ def _beyond_speed(model, model_path, wells, x0) -> str | None:
     worst = None
     for i, rows in enumerate(barriers(model.stiffness, eqs)):
         start = float(np.asarray(wells)[i, 0] if x0 is None else np.asarray(x0)[i])  # default: the first well
-        heights = [b["from_left"] for b in rows if abs(b["left"] - start) < 1e-6 * max(1.0, abs(start)) + 1e-9]
-        heights += [b["from_right"] for b in rows if abs(b["right"] - start) < 1e-6 * max(1.0, abs(start)) + 1e-9]
-        heights = [h for h in heights if h > 0]
+        tol = 1e-6 * max(1.0, abs(start)) + 1e-9
+        heights = [b[f"from_{side}"] for b in rows for side in ("left", "right")
+                   if abs(b[side] - start) < tol and b[f"from_{side}"] > 0]
         if not heights or vmax[i] <= 0:
             continue
         need = float(np.sqrt(2.0 * min(heights) / masses[i]))

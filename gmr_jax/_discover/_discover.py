@@ -110,13 +110,15 @@ CUTOFF_OVER_BAND = 3.0
 INPUT_NOISE_SHARE = 1e-6
 
 
-def carries_noise(u: np.ndarray, dt: float) -> bool:
-    """Whether an input column is filtered by `smooth_input`: it varies, its white noise holds at least
-    `INPUT_NOISE_SHARE` of its power, and its cut-off lies below 0.45 / dt."""
+def _cutoff(u: np.ndarray, dt: float) -> float | None:
+    """`smooth_input`'s low-pass cut-off (Hz) for an input column, or None where it is left as it is: it is
+    constant, its white noise holds less than `INPUT_NOISE_SHARE` of its power, or the cut-off is not below
+    0.45 / dt."""
     u = np.asarray(u, float)
     if np.std(u) == 0 or white_share(u, dt) < INPUT_NOISE_SHARE:
-        return False
-    return 0 < CUTOFF_OVER_BAND * band_edge(u, dt) < 0.45 / dt
+        return None
+    fc = CUTOFF_OVER_BAND * band_edge(u, dt)
+    return fc if 0 < fc < 0.45 / dt else None
 
 
 def white_share(u: np.ndarray, dt: float) -> float:
@@ -136,7 +138,7 @@ def smooth_input(u: np.ndarray, dt: float) -> np.ndarray:
     noise on the input would otherwise drive the simulated resonances. The record is padded (odd
     extension) by three periods of the cut-off, so the filter's start-up transient stays outside it
     (scipy's default of 15 samples left the last seconds of a 0.25 Hz sine at 100 Hz up to 97 % off).
-    Columns that are zero stay zero; a column without measurable white noise (`carries_noise`) is
+    Columns that are zero stay zero; a column without measurable white noise (`_cutoff`) is
     returned unchanged, which the filter could only change.
     """
     u = np.asarray(u, float)
@@ -144,10 +146,8 @@ def smooth_input(u: np.ndarray, dt: float) -> np.ndarray:
         return smooth_input(u[:, None], dt)[:, 0]
     out = u.copy()
     for k in range(u.shape[1]):
-        if not carries_noise(u[:, k], dt):
-            continue
-        fc = CUTOFF_OVER_BAND * band_edge(u[:, k], dt)
-        if 0 < fc < 0.45 / dt:
+        fc = _cutoff(u[:, k], dt)
+        if fc is not None:
             from scipy.signal import butter, filtfilt
 
             bb, aa = butter(4, fc * 2 * dt)

@@ -292,11 +292,10 @@ def check_units(name: str, rec, topology) -> list[str]:
             if w is None or w > x.shape[0]:
                 continue
             d = differentiate(x[:, i], dt, order, w)
-            m = differentiate(meas[:, i], dt, 0, w)
-            dd, dm, mm = float(d @ d), float(d @ m), float(m @ m)
-            if dd <= 0 or mm <= 0:
+            bracket = _scale_bracket(d, differentiate(meas[:, i], dt, 0, w))
+            if bracket is None:
                 continue
-            r = dm / np.sqrt(dd * mm)
+            r, lo, hi = bracket
             if abs(r) < UNITS_MIN_CORR:
                 if (key == "a" and rec.base_acc is not None and (topology.name != "chain" or x.shape[1] == 1)
                         and _reversed_accelerometer(d, meas[:, i] + 2 * b, dt, w)):
@@ -305,8 +304,7 @@ def check_units(name: str, rec, topology) -> list[str]:
                                f"{abs(r):.3f}): an accelerometer mounted or wired reversed; flip it (e.g. --columns "
                                f"'a=-COLUMN'), or the fit takes the input as pushing the wrong way")
                 continue
-            lo, hi = sorted((dm / dd, mm / dm), key=abs)
-            if r > 0 and not (abs(lo) > UNITS_FACTOR or abs(hi) < 1 / UNITS_FACTOR):
+            if _same_scale(r, lo, hi):
                 continue  # the bracket reaches the band about 1
             s = float(np.sign(r) * np.sqrt(abs(lo * hi)))
             what = "velocity" if key == "v" else "relative acceleration (a minus the base's)"
@@ -323,18 +321,31 @@ def check_units(name: str, rec, topology) -> list[str]:
     return _time_unit(name, out, scales)
 
 
+def _scale_bracket(d, m):
+    """(correlation, lo, hi) of a measured signal `m` against the derivative `d` of x: the two least-squares
+    scales <d, m>/<d, d> and <m, m>/<d, m>, ordered by size, which bracket the true one when both carry noise;
+    None where either is zero."""
+    dd, dm, mm = float(d @ d), float(d @ m), float(m @ m)
+    if dd <= 0 or mm <= 0:
+        return None
+    lo, hi = sorted((dm / dd, mm / dm), key=abs)
+    return dm / np.sqrt(dd * mm), lo, hi
+
+
+def _same_scale(r, lo, hi) -> bool:
+    """Rule 13's verdict of agreement: a positive correlation and a bracket that reaches the band
+    1 / `UNITS_FACTOR` .. `UNITS_FACTOR`."""
+    return r > 0 and abs(lo) <= UNITS_FACTOR and abs(hi) >= 1 / UNITS_FACTOR
+
+
 def _reversed_accelerometer(d, flipped_rel, dt, w) -> bool:
-    """-(a) - b (`flipped_rel` = a + b, negated here) matches x'' `d` in scale within `UNITS_FACTOR` at a
-    correlation of at least `UNITS_MIN_CORR` (audit: a reversed accelerometer, a = -(x'' + b), was reported as
-    records leaving their wells: a - b does not correlate with x'' where b is large)."""
+    """-(a) - b (`flipped_rel` = a + b, negated here) matches x'' `d` (`_same_scale`) at a correlation of at least
+    `UNITS_MIN_CORR` (audit: a reversed accelerometer, a = -(x'' + b), was reported as records leaving their
+    wells: a - b does not correlate with x'' where b is large)."""
     from .._recordings._derivatives import differentiate
 
-    m = -differentiate(flipped_rel, dt, 0, w)
-    dd, dm, mm = float(d @ d), float(d @ m), float(m @ m)
-    if dd <= 0 or mm <= 0 or dm / np.sqrt(dd * mm) < UNITS_MIN_CORR:
-        return False
-    lo, hi = sorted((dm / dd, mm / dm), key=abs)
-    return abs(lo) <= UNITS_FACTOR and abs(hi) >= 1 / UNITS_FACTOR
+    bracket = _scale_bracket(d, -differentiate(flipped_rel, dt, 0, w))
+    return bracket is not None and bracket[0] >= UNITS_MIN_CORR and _same_scale(*bracket)
 
 
 def _time_unit(name: str, out: list[str], scales: dict) -> list[str]:

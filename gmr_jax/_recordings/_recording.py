@@ -432,6 +432,12 @@ def save_recording(rec: Recording, path) -> None:
 
 #: the CSV columns numbered per DOF (x0, v0, ..., m0, equilibrium0)
 _NUMBERED = ("x", "v", "a", "f", "m", "equilibrium")
+_NUMBERED_NAME = re.compile(f"({'|'.join(_NUMBERED)})\\d+")
+
+
+def _signal_name(name: str) -> bool:
+    """A contract column name: t, base_acc, or a numbered x0, v0, a0, f0, m0, equilibrium0, ..."""
+    return name in ("t", "base_acc") or bool(_NUMBERED_NAME.fullmatch(name))
 #: CSV headers of a one-DOF recording read as the numbered columns (an extension of the contract's
 #: t, x0.., v0.., a0.., f0..: the names lab files and the NPZ keys use)
 _CSV_ALIASES = {"x": "x0", "v": "v0", "a": "a0", "f": "f0", "force": "f0", "equilibrium": "equilibrium0",
@@ -465,12 +471,7 @@ def _read_csv(path: Path, src: str, raw: bool = False):
     if not raw:  # the names a one-DOF lab file uses (and the NPZ keys), in any case, with a unit: "v [m/s]"
         header, t_scale, scales = _standard_names(header, src)
 
-    def known(h):
-        if h in ("t", "base_acc"):
-            return True
-        return any(h.startswith(p) and h[len(p):].isdigit() for p in _NUMBERED)
-
-    unknown = [] if raw else [h for h in header if not known(h)]
+    unknown = [] if raw else [h for h in header if not _signal_name(h)]
     if unknown or (not raw and ("t" not in header or not {"x0", "v0", "a0"} & set(header))):
         what = f"unknown column(s) {unknown}" if unknown else "missing column 't' or 'x0'"
         raise GMRInputError(f"{src}: {what}; found columns {header}, expected {expected} (the first line must be "
@@ -620,8 +621,7 @@ def _standard_names(header, src):
         name, unit = (m.group(1).strip(), m.group(2).strip()) if m else (h, None)
         low = name.lower()
         low = "t" if low == "time" else low
-        numbered = re.fullmatch(f"({'|'.join(_NUMBERED)})\\d+", low)
-        if low == "t" or low == "base_acc" or _CSV_ALIASES.get(low) or numbered:
+        if _signal_name(low) or _CSV_ALIASES.get(low):
             name = low
         name = _CSV_ALIASES.get(name, name)
         if name == "t" and unit is not None:
@@ -631,7 +631,7 @@ def _standard_names(header, src):
                                     f"give t in seconds (or one of those units in the header, 't [ms]')")
         out.append(name)
         units.append(unit or None)
-    known = [n == "t" or n == "base_acc" or bool(re.fullmatch(f"({'|'.join(_NUMBERED)})\\d+", n)) for n in out]
+    known = [_signal_name(n) for n in out]
     scales = _column_scales([n for n, k in zip(out, known) if k], [u for u, k in zip(units, known) if k], src)
     it = iter(scales)
     return out, t_scale, [next(it) if k else 1.0 for k in known]

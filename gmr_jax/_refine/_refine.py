@@ -163,8 +163,9 @@ class ShootingProblem(eqx.Module):
                           FAILED_WINDOW_RESIDUAL)
 
     def _window_residuals(self, p, w: Windows, adjoint):
-        return window_residuals(self.to_model(p), w, self.starts(p, w), self.stride, self.integrator, adjoint,
-                                FAILED_WINDOW_RESIDUAL)
+        r, ok, _ = window_residuals(self.to_model(p), w, self.starts(p, w), self.stride, self.integrator, adjoint,
+                                    FAILED_WINDOW_RESIDUAL)
+        return r, ok
 
     def residuals(self, p, windows: list[Windows], adjoint=dfx.RecursiveCheckpointAdjoint()):
         """All residuals (flat) and the per-window success flags. With estimated starts these are
@@ -189,7 +190,7 @@ class ShootingProblem(eqx.Module):
 
             def one(z, wi, adj=adj):
                 q, s = z
-                r, _ = window_residuals(self.to_model(q), jax.tree_util.tree_map(lambda a: a[None], wi), s[None],
+                r, _, _ = window_residuals(self.to_model(q), jax.tree_util.tree_map(lambda a: a[None], wi), s[None],
                                         self.stride, self.integrator, adj, FAILED_WINDOW_RESIDUAL)
                 return r[0], r[0]
 
@@ -244,7 +245,7 @@ def shooting_problem(
         v_rms = float(np.sqrt(np.mean(np.concatenate([np.asarray(r.v).ravel() ** 2 for r in recs]))))
         m = m.with_sign_eps(settings.sign_eps * max(v_rms, 1e-300))
     problem = ShootingProblem(m, jnp.asarray(scales), tuple(index), settings.stride, settings.jac, settings.integrator,
-                              settings.starts == "estimated")
+                              check_starts(settings.starts))
     # p = coefficient / scale: the sign of each nonzero start, 0 for a zero start
     signs = np.concatenate([np.sign(np.asarray(getattr(model, ph))[np.asarray(r, int), np.asarray(c, int)])
                             if len(r) else np.zeros(0) for ph, (r, c) in zip(PHYSICS, index)])
@@ -373,15 +374,14 @@ def _moved_law_warnings(model: GlobalModel, refined: GlobalModel, recordings) ->
     fits) allows over the recorded range: the free stiffness terms absorbed what the model lacks elsewhere (a
     tri-stable law fitted to 0.007 %, a v^3 damping term missing: refined with every term free, 0.96 % off, while
     `free="damping"` kept it and did as well on the holdout)."""
+    from .._model._metadata import ranges
     from .._reconstruct._sanity import restoring_uncertainty
 
     if model.covariance is None:
         return []
     recs = [recordings] if not isinstance(recordings, (list, tuple)) else list(recordings)
-    x = np.concatenate([np.asarray(r.x, float).reshape(len(r.t), -1) for r in recs])
     out = []
-    for i in range(model.n_dof):
-        lo, hi = float(x[:, i].min()), float(x[:, i].max())
+    for i, (lo, hi) in enumerate(ranges(recs, "x")):
         k0, k1 = np.asarray(model.stiffness[i], float), np.asarray(refined.stiffness[i], float)
         if not hi > lo or np.array_equal(k0, k1):
             continue

@@ -180,17 +180,18 @@ START_BOX = 0.5
 
 
 def window_residuals(model, w: Windows, starts, stride: int, integrator: Integrator, adjoint,
-                     failed: float) -> tuple[Float[Array, "win res"], Array]:
+                     failed: float) -> tuple[Float[Array, "win res"], Array, Array]:
     """Residuals of every window from `starts` (W, 2D): (x0 - measured x at the first sample,
     simulated - measured x at `t[stride::stride]`) over the recording's std, flattened per
-    window; a failed window's simulated part is the constant `failed`. Returns (W, R), ok (W,)."""
+    window (the first D entries are the start's misfit); a failed window's simulated part is the
+    constant `failed`. Returns (W, R), ok (W,) and the RESULTS values (W,)."""
     d = w.x.shape[-1]
     xs, codes = simulate_windows(model, w, stride, integrator, adjoint, starts)
     ok = codes == RESULTS.successful._value
     e = (xs - w.x[:, stride::stride]) / w.scale[:, None, :]
     e = jnp.where(ok[:, None, None], e, failed)
     e0 = (starts[:, :d] - w.x[:, 0]) / w.scale
-    return jnp.concatenate([e0[:, None, :], e], axis=1).reshape(e.shape[0], -1), ok
+    return jnp.concatenate([e0[:, None, :], e], axis=1).reshape(e.shape[0], -1), ok, codes
 
 
 def fit_starts(model, w: Windows, stride: int, integrator: Integrator, failed: float,
@@ -212,7 +213,7 @@ def fit_starts(model, w: Windows, stride: int, integrator: Integrator, failed: f
         half = START_BOX * jnp.concatenate([wi.scale, wi.vscale])
 
         def res(s):
-            r, ok = window_residuals(model, w1, s[None], stride, integrator, adj, failed)
+            r, ok, _ = window_residuals(model, w1, s[None], stride, integrator, adj, failed)
             return r[0], (r[0], ok[0])
 
         def step(carry, _):
@@ -226,7 +227,7 @@ def fit_starts(model, w: Windows, stride: int, integrator: Integrator, failed: f
             return (nxt, best, best_c), None
 
         (s, best, best_c), _ = jax.lax.scan(step, (s0, s0, jnp.inf), None, length=iterations)
-        r, ok = window_residuals(model, w1, s[None], stride, integrator, adj, failed)
+        r, ok, _ = window_residuals(model, w1, s[None], stride, integrator, adj, failed)
         c = jnp.where(ok[0], r[0] @ r[0], jnp.inf)
         return jnp.where(c < best_c, s, best)
 
@@ -251,14 +252,11 @@ class OutputError:
 def _window_errors(model, groups, stride, integrator, estimated):
     out = []
     for w in groups:
-        d = w.x.shape[-1]
         s = fit_starts(model, w, stride, integrator, FAILED_WINDOW_RESIDUAL) if estimated else measured_starts(w)
-        xs, codes = simulate_windows(model, w, stride, integrator, dfx.ForwardMode(), s)  # no AD here
-        ok = codes == RESULTS.successful._value
-        e = (xs - w.x[:, stride::stride]) / w.scale[:, None, :]
-        if estimated:  # the fitted start's misfit counts, as in the refinement's residuals
-            e = jnp.concatenate([((s[:, :d] - w.x[:, 0]) / w.scale)[:, None, :], e], axis=1)
-        out.append((jnp.sum(jnp.where(ok[:, None, None], e, 0.0) ** 2, axis=(1, 2)), e[0].size, codes))
+        r, ok, codes = window_residuals(model, w, s, stride, integrator, dfx.ForwardMode(), 0.0)  # no AD here
+        if not estimated:  # the recorded start's misfit is 0 by construction: not a sample of the error
+            r = r[:, w.x.shape[-1]:]
+        out.append((jnp.sum(jnp.where(ok[:, None], r, 0.0) ** 2, axis=1), r.shape[1], codes))
     return out
 
 

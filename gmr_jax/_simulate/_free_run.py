@@ -80,7 +80,7 @@ def free_run(model: AbstractMechanicalModel, recording, *, columns: dict | None 
     `diverged` (x left the box of 100 recorded spans around the recorded mean, or turned
     non-finite) or the solver's failure code; `stats["message"]` says it in words.
     """
-    from .._discover._discover import SIM, carries_noise, sim_start, smooth_input
+    from .._discover._discover import SIM, sim_start, smooth_input
     from .._discover._offset import comparable, place
 
     if not isinstance(model, AbstractMechanicalModel):
@@ -90,14 +90,15 @@ def free_run(model: AbstractMechanicalModel, recording, *, columns: dict | None 
     if rec.n_dof != model.n_dof:
         raise GMRInputError(f"free_run: {rec.name} has {rec.n_dof} DOF(s), the model {model.n_dof}")
     rec = rec.complete(model.topology.name)
+    b, f = rec.inputs()
+    smooth_b, smooth_f = smooth_input(b, rec.dt), smooth_input(f, rec.dt)
     if not rec.driven:  # the contract's free decay, or an input column left out
         notes = ["no input column (base_acc or force): simulated as a free decay from the first state"]
         warnings.warn(rec.free_decay_sentence("the model is run"), GMRDataWarning, stacklevel=2)
     else:
-        b, f = rec.inputs()
-        noisy = any(carries_noise(c, rec.dt) for c in np.column_stack([b, f]).T)
-        notes = ["input low-passed at 3x its band edge (it carries white noise), cubic-spline interpolated" if noisy
-                 else "input cubic-spline interpolated (no measurable noise on it: not filtered)"]
+        filtered = not (np.array_equal(smooth_b, b) and np.array_equal(smooth_f, f))
+        notes = ["input low-passed at 3x its band edge (it carries white noise), cubic-spline interpolated"
+                 if filtered else "input cubic-spline interpolated (no measurable noise on it: not filtered)"]
     if not rec.equilibrium_observed:
         rec = place(model, [rec])[0][0]
         notes.append("x integrated from the recording's " + rec.integration["from"] +
@@ -105,8 +106,7 @@ def free_run(model: AbstractMechanicalModel, recording, *, columns: dict | None 
     k = sim_start(rec)
     if k:
         notes.append(f"started at sample {k} (v estimated from x: an interior estimate)")
-    b, f = rec.inputs()
-    inp = sampled_spline(rec.t, smooth_input(b, rec.dt), smooth_input(f, rec.dt), model.n_dof)
+    inp = sampled_spline(rec.t, smooth_b, smooth_f, model.n_dof)  # `place` moves x only: the inputs stand
     if integrator is None:
         integrator = SIM if 20 * rec.n_samples <= SIM.max_steps else Integrator(
             rtol=SIM.rtol, atol=SIM.atol, max_steps=int(20 * rec.n_samples))

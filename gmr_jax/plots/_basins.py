@@ -14,6 +14,12 @@ def _digits(config: int, n_dof: int, base: int) -> list[int]:
     return [(config // base**i) % base for i in range(n_dof)]
 
 
+def config_code(digits, base: int) -> int:
+    """The configuration code of per-cell well indices (cell 0 first) in `base` (`_digits`' inverse; as
+    `BasinMap.config` encodes them)."""
+    return int(sum(int(k) * base**i for i, k in enumerate(digits)))
+
+
 def config_label(config: int, n_dof: int, base: int = 2) -> str:
     """0-1-1-0-0 style name (cell 0 first) of a configuration code (`BasinMap.config`: a bit
     field for bistable cells; digits in `base` K with K wells per cell, e.g. 0-2 for a tri-stable
