@@ -291,6 +291,10 @@ def test_chain_demo_kresling3(tmp_path):
     assert (tmp_path / "transmissibility_kresling3.png").exists()
     m = g.load_model(tmp_path / "model_gmr_kresling3.json")
     assert m.n_dof == 3 and m.topology == "chain"
+    # the fits' warnings go into the report (the baseline's inadmissible laws among them), not between its lines
+    assert set(rep["warnings"]) == {"gmr", "gmc"}
+    assert "Warnings of the fits" in (tmp_path / "report_kresling3.md").read_text()
+    assert "GMRDataWarning" not in r.stderr
 
 
 def test_fast_compile_flags_only_before_jax_starts(monkeypatch):

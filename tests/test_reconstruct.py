@@ -49,6 +49,14 @@ def test_gmc_sindy_runs_and_degrades(joint_data):
     gm = g.gmc_sindy(recs, g.Library(7, 7))
     # at 0.5 degrees the global-library fit loses the damping (paper Fig. 6c); measured, not assumed
     assert damping_error(gm.value, s.truth, 0, s.x_range[0], s.v_range[0]) > 0.2
+    # and says where its damping feeds energy in (audit: absurd baseline laws came without a word); checked on the
+    # model's own damping force at the point named, and against a grid of the span it names
+    said = [w for w in gm.stats["warnings"] if "GMC-SINDy model is not admissible" in w]
+    assert len(said) == 1 and "its damping feeds energy in (D v < 0) at x = " in said[0], gm.stats["warnings"]
+    x0, v0 = (float(said[0].split(f"{k} = ")[1].split(",")[0].split(";")[0]) for k in ("x", "v"))
+    assert float(gm.value.damping(np.array([x0]), np.array([v0]))[0]) * v0 < 0
+    # the paper route's model on the same data is admissible: no such warning
+    assert not any("not admissible" in w for w in g.reconstruct(recs, g.Library(5, 5)).stats["warnings"])
 
 
 @pytest.mark.slow  # a second NES reconstruction (Library(3, 3)); the default tier checks the NES at the

@@ -1,3 +1,5 @@
+import warnings
+
 import numpy as np
 import pytest
 
@@ -555,7 +557,9 @@ def test_labelled_units_are_made_coherent(tmp_path):
     np.testing.assert_allclose(r.a[:, 0], 9.80665 * a)
     np.testing.assert_allclose(r.base_acc, 9.80665 * b)
     assert r.equilibrium.tolist() == [0.5]
-    r = read("t,a0 [m/s^2],base_acc,equilibrium [mm]", a, b, np.full_like(t, 12.0))  # the first label is m
+    with pytest.warns(g.GMRDataWarning, match=r"equilibrium \[mm\] converted to m .* but base_acc carries no unit "
+                                              r"and is taken as it is, in m: if not, label it"):
+        r = read("t,a0 [m/s^2],base_acc,equilibrium [mm]", a, b, np.full_like(t, 12.0))  # the first label is m
     np.testing.assert_allclose(r.a[:, 0], a)
     np.testing.assert_allclose(r.base_acc, b)  # unlabelled: as it is
     np.testing.assert_allclose(r.equilibrium, [0.012])
@@ -567,6 +571,12 @@ def test_labelled_units_are_made_coherent(tmp_path):
     np.testing.assert_allclose(r.x[:, 0], 1e-3 * a)
     np.testing.assert_allclose(r.force[:, 0], 1e3 * b)
     assert r.masses.tolist() == [0.5]
+    with pytest.warns(g.GMRDataWarning, match=r"a \[g\] converted to m .* but x carries no unit"):
+        r = read("t,x,a [g]", a, a)  # audit: x in mm unlabelled beside 'a0 [g]': 1000x apart, unsaid
+    np.testing.assert_allclose(r.x[:, 0], a)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read("t,x,a [m/s^2]", a, a)  # nothing converted: silent
     with pytest.raises(g.GMRInputError, match="the unit 'V' of column 'a0' is not one gmr_jax converts.*leave the "
                                               "unit out"):
         read("t,x,a [V]", a, a)

@@ -2,11 +2,13 @@
 
 import json
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from .. import Library, gmc_sindy, reconstruct, save_model
+from .._errors import GMRDataWarning
 # metrics, plots (matplotlib) and systems are imported where used: every command imports this
 # module to register `gmr demo`, and `gmr fit` need not pay for them at start-up
 
@@ -71,23 +73,25 @@ def run_case(system, amplitude, label, *, snr_db=60.0, seed=0, out: Path | None 
     r_gmr, d_gmr = system.orders["gmr"]
     r_gmc, d_gmc = system.orders["gmc"]
     t0 = time.perf_counter()
-    gmr = reconstruct(recs, Library(r_gmr, d_gmr))
+    gmr, gmr_said = _quiet(reconstruct, recs, Library(r_gmr, d_gmr))
     gmr_model, gmr_dofs = gmr.value, gmr.stats["dofs"]
     t_gmr = time.perf_counter() - t0
     t0 = time.perf_counter()
-    gmc = gmc_sindy(recs, Library(r_gmc, d_gmc)).value
+    gmc, gmc_said = _quiet(gmc_sindy, recs, Library(r_gmc, d_gmc))
+    gmc = gmc.value
     t_gmc = time.perf_counter() - t0
     xr, vr = system.x_range[0], system.v_range[0]
     span = np.ptp(system.equilibria[:, 0])
     ratio = max(np.ptp(r.x[:, 0]) / 2 for r in recs) / span
     row = {"system": system.name, "description": system.description, "amplitude": label,
            "amplitude_ratio": float(ratio), "seconds": {"data": t_data, "gmr": t_gmr, "gmc": t_gmc}}
-    for name, model in (("gmr", gmr_model), ("gmc", gmc)):
+    for name, model, said in (("gmr", gmr_model, gmr_said), ("gmc", gmc, gmc_said)):
         row[name] = {
             "restoring_error": restoring_error(model, system.truth, 0, xr),
             "damping_error": damping_error(model, system.truth, 0, xr, vr),
             "equilibria_ok": _equilibria_match(model, system.truth, xr, 0.02 * span),
             "equations": model.equations(),
+            "warnings": said,
         }
     row["gmr"]["global_orders"] = {"K_r": gmr_dofs[0].stats["K_r"], "K_d": gmr_dofs[0].stats["K_d"]}
     row["truth"] = system.truth.equations()
@@ -102,6 +106,27 @@ def run_case(system, amplitude, label, *, snr_db=60.0, seed=0, out: Path | None 
         f"{row['gmr']['damping_error']:.2e}   GMC-SINDy {row['gmc']['restoring_error']:.2e} / "
         f"{row['gmc']['damping_error']:.2e}   ({t_data + t_gmr + t_gmc:.1f} s)")
     return row
+
+
+def _quiet(fn, *args):
+    """(fn(*args), the GMRDataWarning messages it emitted): the demo writes them into its report (the baseline's
+    inadmissible models, `gmc_sindy`) instead of printing them between the table's lines."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", GMRDataWarning)
+        out = fn(*args)
+    for w in caught:
+        if not issubclass(w.category, GMRDataWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return out, [str(w.message) for w in caught if issubclass(w.category, GMRDataWarning)]
+
+
+def warning_lines(rows, what=lambda r: f"{r['description']}, {r['amplitude']}") -> list[str]:
+    """The report's list of the warnings each method's fit gave, case by case (none: one line that says so)."""
+    lines = []
+    for r in rows:
+        for key, label in (("gmr", "GMR"), ("gmc", "GMC-SINDy")):
+            lines += [f"- {what(r)}, {label}: {w}" for w in r[key].get("warnings", [])]
+    return lines or ["- none"]
 
 
 def table(rows) -> str:
@@ -137,9 +162,13 @@ def run_demo(out="gmr_out", *, log=print) -> list[dict]:
     for r in rows:
         lines.append(f"- {r['description']}, {r['amplitude']}: `{'; '.join(r['gmr']['equations'])}`"
                      f" (truth `{'; '.join(r['truth'])}`)")
+    lines += ["", "Warnings of the fits (what `reconstruct` and `gmc_sindy` emit as GMRDataWarning):", ""]
+    lines += warning_lines(rows)
     (out / "report.md").write_text("\n".join(lines) + "\n")
     (out / "report.json").write_text(json.dumps({"cases": rows}, indent=1, default=float))
     log("")
     log(md)
+    said = {k: sum(len(r[k]["warnings"]) for r in rows) for k in ("gmr", "gmc")}
+    log(f"\nwarnings: GMR {said['gmr']}, GMC-SINDy {said['gmc']} (listed in report.md)")
     log(f"\nwrote {out}/report.md, report.json, case_*.png, model_*.json in {time.perf_counter() - t0:.0f} s")
     return rows

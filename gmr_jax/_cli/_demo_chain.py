@@ -12,6 +12,7 @@ from .. import Library, gmc_sindy, reconstruct, resonance_peaks, save_model, sta
 from ..metrics import damping_error, energy_barriers, equilibria, restoring_error
 from ..plots import case_figure
 from ..systems import KRESLING3_AMPLITUDE, KRESLING5_AMPLITUDE, kresling3, kresling5, make_recordings
+from ._demo import _quiet
 
 CHAINS = {"kresling5": (kresling5, KRESLING5_AMPLITUDE, 10.0), "kresling3": (kresling3, KRESLING3_AMPLITUDE, 12.0)}
 #: Base displacement amplitude of the transmissibility runs (m).
@@ -79,8 +80,9 @@ def run_chain_demo(name="kresling5", out="gmr_out", *, log=print) -> dict:
     log(f"[1/4] base-sweep recordings, folded and deployed configurations ({amplitude * 1e3:g} mm, 60 dB) ...")
     recs = make_recordings(system, amplitude, seed=0)
     log("[2/4] GMR (local Library(5,5)) and GMC-SINDy (Library(5,5)) ...")
-    gmr = reconstruct(recs, Library(*system.orders["gmr"])).value
-    gmc = gmc_sindy(recs, Library(*system.orders["gmc"])).value
+    gmr, gmr_said = _quiet(reconstruct, recs, Library(*system.orders["gmr"]))
+    gmc, gmc_said = _quiet(gmc_sindy, recs, Library(*system.orders["gmc"]))
+    gmr, gmc = gmr.value, gmc.value
     models = {"truth": system.truth, "GMR": gmr, "GMC-SINDy": gmc}
     log("[3/4] per-cell errors and figures ...")
     cells = []
@@ -121,10 +123,12 @@ def run_chain_demo(name="kresling5", out="gmr_out", *, log=print) -> dict:
                      f"{np.round(res['GMC-SINDy']['peaks'], 3).tolist()} (max error "
                      f"{100 * res['GMC-SINDy']['max_peak_error']:.2f} %)")
     lines += ["", "Global models (GMR):", ""] + [f"- `{e}`" for e in gmr.equations()]
+    lines += ["", "Warnings of the fits (what `reconstruct` and `gmc_sindy` emit as GMRDataWarning):", ""]
+    lines += [f"- {label}: {w}" for label, said in (("GMR", gmr_said), ("GMC-SINDy", gmc_said)) for w in said] or ["- none"]
     md = "\n".join(lines) + "\n"
     (out / f"report_{name}.md").write_text(md)
     report = {"system": name, "description": system.description, "cells": cells, "transmissibility": trans,
-              "seconds": time.perf_counter() - t0}
+              "warnings": {"gmr": gmr_said, "gmc": gmc_said}, "seconds": time.perf_counter() - t0}
     (out / f"report_{name}.json").write_text(json.dumps(report, indent=1, default=float))
     log("")
     log("\n".join(lines[4:4 + d + 2]))

@@ -1217,5 +1217,37 @@ def gmc_sindy(
     model = _model_from_blocks(masses, topology, stiff, vdamp, pdamp)
     training = training_scores(model, recs, masses, topology)
     warnings += _sanity.check_fit_quality(training)
+    warnings += _baseline_faults(model, recs)
     _emit(warnings)
     return _solution(model, failure, "GMC-SINDy", library, reports, training, warnings, recs)
+
+
+def _baseline_faults(model: GlobalModel, recs) -> list[str]:
+    """GMC-SINDy's model held to GMR's admissibility (audit: a baseline damping law that feeds energy in between the
+    wells, or a restoring force with wells the data do not have, came without a word): per DOF with two or more
+    wells (recordings grouped as `reconstruct` groups them), `restoring_faults` over the wells' span widened by half
+    of it, and `damping_faults` there up to the speed of a fall from anywhere in that span to the lowest well."""
+    out = []
+    for i in range(model.n_dof):
+        means = np.array([r.x[:, i].mean() for r in recs])
+        spread = float(np.ptp(means))
+        labels = group_wells(means, 0.1 * spread)
+        if labels.max() < 1:
+            continue
+        wells = np.array([means[labels == k].mean() for k in range(labels.max() + 1)])
+        k = np.asarray(model.stiffness[i], float)
+        half = 0.5 * (wells.max() - wells.min())
+        antider = np.polynomial.polynomial.polyint(k)
+        xs = np.linspace(wells.min() - half, wells.max() + half, 401)
+        drop = float(np.max(np.polynomial.polynomial.polyval(xs, antider))
+                     - np.min(np.polynomial.polynomial.polyval(wells, antider)))
+        speed = float(np.sqrt(2.0 * max(drop, 0.0) / float(model.masses[i])))
+        why = restoring_faults(k, wells)
+        if speed > 0:
+            why += damping_faults(np.asarray(model.velocity_damping[i]), np.asarray(model.position_damping[i]), wells,
+                                  speed)
+        if why:
+            out.append(f"DOF {i}: the GMC-SINDy model is not admissible where it is used (its {wells.size} recorded "
+                       f"wells and the span between them, widened by half of it; speeds up to {speed:.3g}, a fall from "
+                       f"there to the lowest well): {'; '.join(why)}; simulations of it can gain energy or escape")
+    return out

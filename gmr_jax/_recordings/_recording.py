@@ -586,7 +586,7 @@ def _unit_factor(kind: str, unit: str, column: str, src: str) -> tuple[str, floa
     return found
 
 
-def _column_scales(names, units, src) -> list[float]:
+def _column_scales(names, units, src, labels=None) -> list[float]:
     """Factors that bring a CSV's labelled columns to one coherent set of units: lengths (and 'g') to the first
     labelled kinematic column's length unit, or to m where a force or mass column carries a unit (then N and kg,
     coherent with m and s); unlabelled columns are taken as they are. An accelerometer in g becomes m/s^2 (audit:
@@ -603,9 +603,24 @@ def _column_scales(names, units, src) -> list[float]:
         raise GMRInputError(f"{src}: an acceleration in g beside angles in the header: give angular accelerations in "
                             f"rad/s^2 or deg/s^2")
     coherent_si = any(fam in ("force", "mass") for fam, _ in parsed.values())
-    ref = 1.0 if coherent_si else next((f for n, (fam, f) in parsed.items() if fam in ("length", "angle")), 1.0)
-    return [1.0 if n not in parsed else parsed[n][1] / (ref if parsed[n][0] in ("length", "angle", "g") else 1.0)
-            for n in names]
+    ref_name = None if coherent_si else next((n for n, (fam, _) in parsed.items() if fam in ("length", "angle")), None)
+    ref = 1.0 if ref_name is None else parsed[ref_name][1]
+    scales = [1.0 if n not in parsed else parsed[n][1] / (ref if parsed[n][0] in ("length", "angle", "g") else 1.0)
+              for n in names]
+    labels = names if labels is None else labels  # the file's own header cells, for the message
+    converted = [h for n, h, f in zip(names, labels, scales) if n in parsed and f != 1.0]
+    bare = [h for n, h in zip(names, labels)
+            if n not in parsed and n != "t" and kind_of[n] in ("x", "v", "a", "base_acc", "equilibrium")]
+    if converted and bare:
+        # audit: 'a0 [g]' labelled, x unlabelled in mm: a was made m/s^2 and x taken as m, 1000x apart, unsaid
+        table = ANGLE_UNITS if ref_name is not None and parsed[ref_name][0] == "angle" else LENGTH_UNITS
+        unit = next(k for k, f in table.items() if f == ref)
+        warnings.warn(f"{src}: {', '.join(converted)} converted to {unit} (per s, per s^2), but {', '.join(bare)} "
+                      f"carr{'ies' if len(bare) == 1 else 'y'} no unit and {'is' if len(bare) == 1 else 'are'} taken "
+                      f"as {'it is' if len(bare) == 1 else 'they are'}, in {unit}: if not, label "
+                      f"{'it' if len(bare) == 1 else 'them'} in the header ('x0 [mm]', 'base_acc [g]')",
+                      GMRDataWarning, stacklevel=4)
+    return scales
 
 
 def _standard_names(header, src):
@@ -632,7 +647,8 @@ def _standard_names(header, src):
         out.append(name)
         units.append(unit or None)
     known = [_signal_name(n) for n in out]
-    scales = _column_scales([n for n, k in zip(out, known) if k], [u for u, k in zip(units, known) if k], src)
+    scales = _column_scales([n for n, k in zip(out, known) if k], [u for u, k in zip(units, known) if k], src,
+                            [h.strip() for h, k in zip(header, known) if k])
     it = iter(scales)
     return out, t_scale, [next(it) if k else 1.0 for k in known]
 
