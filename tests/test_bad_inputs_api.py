@@ -224,7 +224,7 @@ CASES = [
     ("recording_too_short", _load_npz(t=np.arange(10) * 1e-3, x=np.arange(10.0)), r"only 10 samples"),
     ("recording_csv_no_t", _load_file("r.csv", _csv_text(header="stamp,x0")),
      r"unknown column\(s\) \['stamp'\]; found columns \['stamp', 'x0'\], expected t, x0.*map them: --columns"),
-    ("recording_csv_no_x", _load_file("r.csv", _csv_text(header="t,f0")), r"missing column 't' or 'x0'"),
+    ("recording_csv_no_x", _load_file("r.csv", _csv_text(header="t,f0")), r"no column of DOF 0 \(x0, v0 or a0\)"),
     ("recording_csv_no_header", _load_file("r.csv", _csv_text(header="0.0,0.0")),
      r"the first line holds numbers \(0.0,0.0\), not column names: a header row is needed"),
     ("recording_csv_duplicate_column", _load_file("r.csv", _csv_text(header="t,x0").replace("t,x0", "t,x0,x0", 1)),

@@ -1,4 +1,5 @@
 import dataclasses
+import json
 import warnings
 
 import equinox as eqx
@@ -235,7 +236,7 @@ def test_cli_refine(chain_data, tmp_path, capsys):
 
     truth, train, hold = chain_data
     start = perturb(truth, (jnp.array([[1, 1.2, 1, 1], [1, 1, 1, 0.8]]), jnp.ones((2, 3))))
-    g.save_model(start, tmp_path / "start.json")
+    g.save_model(start, tmp_path / "start.json", warnings=["DOF 1: a caveat of the fit"], data_range=[[0.0, 1e-4]] * 2)
     rec_paths = []
     for r in (*train, *hold):
         p = tmp_path / f"{r.name}.npz"
@@ -251,6 +252,12 @@ def test_cli_refine(chain_data, tmp_path, capsys):
     np.testing.assert_array_equal(np.asarray(refined.position_damping)[:, 0], np.asarray(start.position_damping)[:, 0])
     assert "holdout NRMSE over 0.5 s windows" in printed and "free run over the whole record NRMSE" in printed
     assert "lacks something no free coefficient covers" not in printed, printed  # an exact structure: no warning
+    # the given file's caveats and ranges stay with the refined one (audit: dropped, `gmr show` said "none")
+    doc = json.loads(out.read_text())
+    assert doc["warnings"][0] == f"the given model ({tmp_path / 'start.json'}): DOF 1: a caveat of the fit"
+    lo = np.min(np.concatenate([r.x for r in train[:1]]), axis=0)
+    assert [d[0] for d in doc["data_range"]] == pytest.approx(np.minimum(lo, 0.0).tolist())
+    assert doc["given_model"] == str(tmp_path / "start.json") and doc["refinement"]["max_relative_change"] > 0.05
     # user errors: one line, exit status 2
     assert main(["refine", str(tmp_path / "start.json"), rec_paths[0], "--out", str(out), "--free", "springs"]) == 2
     assert main(["refine", str(tmp_path / "start.json"), rec_paths[0], "--out", str(out), "--window", "99"]) == 2

@@ -18,7 +18,7 @@ def register(sub):
     b.add_argument("--x-range", default=None, help="LO:HI deformation interval to search for wells (default: the "
                    "stable roots of the model's restoring polynomial, within the training data range when the file "
                    "records it)")
-    b.add_argument("--settle-time", type=positive_float, default=10.0, help="free time after the load (s)")
+    b.add_argument("--settle-time", type=positive_float, default=10.0, help="free time after the load, s (default 10)")
     b.add_argument("--load", choices=["tip", "base"], default="tip",
                    help="tip: force A sin(2 pi f t) on the last mass (Eq. 25, default); base: the same half-sine "
                    "as base acceleration (A in m/s^2)")
@@ -110,6 +110,13 @@ def _probability(gmr, model, args, f, A, x0, settings, out, wells) -> None:
           f"{100 * float(np.mean(conf == 1.0)):.3g} % of the points, the most likely configuration at least 90 % "
           f"likely at {100 * float(np.mean(conf >= 0.9)):.3g} %; the model's own map is the most likely at "
           f"{100 * agree:.3g} % (basins_probability.npz, basins_confidence.png)")
+    configs = np.asarray(bp.configs)
+    if np.any(configs == -1):  # audit: draws that did not settle were counted as used, and nothing said so
+        unsettled = np.asarray(bp.probability)[..., int(np.argmax(configs == -1))]
+        most = int(np.sum(np.asarray(bp.most_likely) == -1))
+        print(f"gmr basins: warning: --draws: {100 * float(np.mean(unsettled)):.3g} % of the drawn runs did not "
+              f"settle in a well or failed (configuration -1), the most likely outcome at {most} of {conf.size} "
+              f"points: lengthen --settle-time (now {args.settle_time:g} s), or those points' maps are unknown")
 
 
 def _beyond_data(model, model_path, A, load: str) -> str | None:

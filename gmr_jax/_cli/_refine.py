@@ -93,13 +93,57 @@ def run(args) -> int:
         print(f"gmr refine: error: {RESULTS[sol.result]} [{code_name(sol.result)}]; the model was not written",
               flush=True)
         return 1
-    gmr.save_model(sol.value, args.out, method="refined", refinement=report,
-                   warnings=list(report["warnings"]))  # `gmr show` prints them
+    moved = _moved(model, sol.value)
+    if moved == 0.0:
+        w = (f"no free coefficient moved in {st['iterations']} iteration(s) (the solver took no step that lowered "
+             f"the windowed error: windows that fail or diverge carry no gradient); the refined model is the given "
+             f"one: check the windows' failures above, a shorter --window, or the model's fit to these records")
+        print(f"gmr refine: warning: {w}")
+        report["warnings"] = list(report["warnings"]) + [w]
+    report["max_relative_change"] = moved
+    given = _given_metadata(args.model, train)
+    kept = [f"the given model ({args.model}): {w}" for w in given.pop("given_warnings")]
+    gmr.save_model(sol.value, args.out, method="refined", refinement=report, **given,
+                   warnings=kept + list(report["warnings"]))  # `gmr show` prints them
     for line in sol.value.equations():
         print("  " + line)
     print(f"wrote {args.out}")
     stage("done")
     return 0
+
+
+def _moved(given, refined) -> float:
+    """The largest relative change of any coefficient from `given` to `refined` (0.0: none moved)."""
+    out = 0.0
+    for block in ("stiffness", "velocity_damping", "position_damping"):
+        a, b = (np.asarray(getattr(m, block), float) for m in (given, refined))
+        if a.shape == b.shape and a.size:
+            out = max(out, float(np.max(np.abs(b - a) / np.maximum(np.abs(a), 1e-300))))
+    return out
+
+
+def _given_metadata(path, recordings) -> dict:
+    """What the refined model's file keeps of the given one's (audit: the refined file dropped the fit's warnings
+    and its data and speed ranges, so `gmr show` said "no warnings" of laws 17-28 % off and `gmr basins` lost its
+    extrapolation notes): `data_range` and `speed_range` widened to the refinement's recordings, the given
+    warnings (as `given_warnings`, for the caller to prefix) and the given file's name. Its covariance is not kept:
+    the refined coefficients have none (no band, no `--draws`)."""
+    import json
+
+    from .._model._metadata import ranges
+
+    try:
+        doc = json.loads(open(path).read())
+    except (OSError, ValueError):
+        doc = {}
+    out = {"given_model": str(path), "given_warnings": [str(w) for w in doc.get("warnings", [])]}
+    for key, sig in (("data_range", "x"), ("speed_range", "v")):
+        now = ranges([r.complete(doc.get("topology", "independent")) for r in recordings], sig)
+        old = doc.get(key)
+        if isinstance(old, list) and len(old) == len(now):
+            now = [[min(a[0], b[0]), max(a[1], b[1])] for a, b in zip(old, now)]
+        out[key] = now
+    return out
 
 
 #: the refined model's error over one input period (or the whole record) above this many times its windowed error,

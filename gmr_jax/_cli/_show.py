@@ -237,7 +237,9 @@ def _describe(model, d: dict, name: str, p: int) -> str:
     method = d.get("method")
     lib = d.get("library")
     if method or lib:
-        libs = f"; local-fit library r={lib.get('r')}, d={lib.get('d')}" if isinstance(lib, dict) else ""
+        degrees = [int(np.trim_zeros(np.asarray(k, float), "b").size) - 1 for k in np.asarray(model.stiffness)]
+        libs = (f"; local-fit library r={lib.get('r')}, d={lib.get('d')} (the local Taylor fits' orders; the global "
+                f"restoring law's degree, per DOF: {', '.join(map(str, degrees))})" if isinstance(lib, dict) else "")
         out.append(f"method: {method or 'not recorded'}{libs}")
 
     out += ["", "Equations (force of each DOF, model units):"] + _term_table(model, d, p)

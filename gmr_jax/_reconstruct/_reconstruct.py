@@ -41,6 +41,7 @@ from . import (
     _shape_prior,
     _velocity_noise,
 )
+from ._damping_orders import add_order_vectors, unresolved_orders
 from ._damping_slopes import add_slope_vectors, slope_vectors, unresolved_slopes
 from ._degree import (
     averaged_parts,
@@ -731,9 +732,20 @@ def _borrow(fits: LocalFit, plan: list[dict], xs, vs, ys, w, library: Library, x
     return eqx.tree_at(lambda f: (f.coef, f.covariance), fits, (coef, cov)), borrowed
 
 
-def _pool_laws(stiff: list, vdamp: list, pdamp: list, covs: list, reports: list, recs) -> None:
+#: `_pool_laws` says so where pooling narrowed a DOF's band between the wells by more than this factor (rms standard
+#: deviation over the nodes)
+DESIGN_NARROWING = 3.0
+
+
+def _pool_laws(stiff: list, vdamp: list, pdamp: list, covs: list, reports: list, recs) -> list[str]:
     """`_design_law.pool_design_laws` on every DOF's law and calibrated covariance, in place; the
-    outcome per DOF goes to `reports[i].stats["shared_design"]["law"]`."""
+    outcome per DOF goes to `reports[i].stats["shared_design"]["law"]`. Returns the warnings of the DOFs whose band
+    between the wells the pooling narrowed by more than `DESIGN_NARROWING` (audit, a 3-cell chain of tanh-law cells
+    10-20 % apart in their parameters, 60 dB: two cells' laws, 17 and 28 % off the truth, agreed with each other to
+    0.2 % (they err alike: one non-polynomial shape interpolated from the same Taylor orders), were pooled as one
+    design, and their bands fell from +-54 / 109 % to +-3.5 %, the truth inside on 16-30 % of the span; the pooling
+    cannot tell a shared error from a shared law)."""
+    said = []
     sizes = [(a.size, b.size, c.size) for a, b, c in zip(stiff, vdamp, pdamp)]
     ok = [np.asarray(cv).shape == (sum(n),) * 2 for cv, n in zip(covs, sizes)]
     flats = [np.concatenate([a, b, c]) for a, b, c in zip(stiff, vdamp, pdamp)]
@@ -751,12 +763,23 @@ def _pool_laws(stiff: list, vdamp: list, pdamp: list, covs: list, reports: list,
         entry = {"cells": members, "tau": law["tau"]}
         if k in law["per_dof"]:
             entry |= law["per_dof"][k]
+            before, after = entry["sd_before"], entry["sd_after"]
+            if after > 0 and before > DESIGN_NARROWING * after:
+                said.append(
+                    f"DOF {i}: its band between the wells is the design's: cells {members} pooled as one design (their "
+                    f"laws {100 * (law['tau'] or 0.0):.3g} % apart beyond their noise) narrowed it from an rms "
+                    f"standard deviation of {100 * before:.3g} % to {100 * after:.3g} % of F'(w0) L. That holds only "
+                    f"if the cells share one law: fitted laws that agree can still share one error (a non-polynomial "
+                    f"law interpolated alike from the same Taylor orders), which pooling cannot see; fit with "
+                    f"--no-shared-design (shared_design=False) for the DOF's own band, or record motion between the "
+                    f"wells to check it")
         else:
             entry["why"] = law["excluded"].get(k, "not pooled")
         reports[i].stats.setdefault("shared_design", {})["law"] = entry
     for i in range(len(flats)):
         if not ok[i]:
             reports[i].stats.setdefault("shared_design", {})["law"] = {"why": "its covariance is missing"}
+    return said
 
 
 def _design_stats(design: dict | None, i: int, borrowed: list, why: str | None = None,
@@ -1114,6 +1137,15 @@ def reconstruct(
             cov_i = add_slope_vectors(cov_i, *(np.asarray(a).shape[0] for a in (g.stiffness, g.velocity_damping,
                                                                                  g.position_damping)),
                                       slope_vectors(eq, *slopes))
+            # velocity orders no well kept (rule 14b): in the band, and said where they matter
+            found_orders = unresolved_orders(data_fits, xs, vs, ys, w, library, solver, np.asarray(g.velocity_damping),
+                                             noises[i], x_noises[i], band)
+            cov_i = add_order_vectors(cov_i, np.asarray(g.stiffness).shape[0], np.asarray(g.velocity_damping).shape[0],
+                                      found_orders)
+            coord.stats["unresolved_velocity_orders"] = {j: v[:3] + v[4:] for j, v in found_orders.items()}
+            warnings += _sanity.check_unresolved_damping(
+                i, np.asarray(g.velocity_damping), np.asarray(g.position_damping), found_orders, recorded_speed(vs, w),
+                _sanity.crossing_speed(g.stiffness, eq, float(masses[i])), float(xall.min()), float(xall.max()))
         se = GlobalCoefficients(*(np.pad(np.asarray(a), (0, np.asarray(b).shape[0] - np.asarray(a).shape[0]))
                                   for a, b in zip((se.stiffness, se.velocity_damping, se.position_damping),
                                                   (g.stiffness, g.velocity_damping, g.position_damping))))
@@ -1143,7 +1175,7 @@ def reconstruct(
     other_designs = design is not None and design["tau"] is not None and design["tau"] > _shape_prior.TAU_MAX
     if shared_design and d > 1 and not other_designs:
         say("cells of one design: their laws between the wells pooled")
-        _pool_laws(stiff, vdamp, pdamp, covs, reports, recs)
+        warnings += _pool_laws(stiff, vdamp, pdamp, covs, reports, recs)
     say("training scores, sanity checks, resolution report")
     stderr = {STIFFNESS: jnp.asarray(stack_padded(se_s)), VELOCITY_DAMPING: jnp.asarray(stack_padded(se_v)),
               POSITION_DAMPING: jnp.asarray(stack_padded(se_p))}

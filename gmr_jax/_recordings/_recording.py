@@ -473,7 +473,9 @@ def _read_csv(path: Path, src: str, raw: bool = False):
 
     unknown = [] if raw else [h for h in header if not _signal_name(h)]
     if unknown or (not raw and ("t" not in header or not {"x0", "v0", "a0"} & set(header))):
-        what = f"unknown column(s) {unknown}" if unknown else "missing column 't' or 'x0'"
+        what = (f"unknown column(s) {unknown}" if unknown else "no column 't'" if "t" not in header else
+                "no column of DOF 0 (x0, v0 or a0): every DOF, from 0 on, needs a sensor (x, v or a; a chain's "
+                "cells numbered from the base); a DOF without one cannot be fitted")
         raise GMRInputError(f"{src}: {what}; found columns {header}, expected {expected} (the first line must be "
                             f"this header; a unit in brackets is allowed, 'v [m/s]'). To read a lab file's own "
                             f"names, map them: --columns t=Time,x=disp (CLI) or columns={{'t': 'Time', 'x': "
@@ -667,7 +669,8 @@ def _read_npz(path: Path, src: str, raw: bool = False):
         found = sorted(z.files)
         unknown = [] if raw else [k for k in found if k not in SIGNALS]
         if unknown or (not raw and ("t" not in found or not {"x", "v", "a"} & set(found))):
-            what = f"unknown array(s) {unknown}" if unknown else "missing 't' or 'x'"
+            what = (f"unknown array(s) {unknown}" if unknown else "no array 't'" if "t" not in found else
+                    "no array 'x' (or 'v' or 'a')")
             raise GMRInputError(f"{src}: NPZ needs arrays 't' and 'x' (or 'v' or 'a' alone: velocity- or "
                                 f"acceleration-only sensors; optional v, a, base_acc, force, masses, equilibrium); "
                                 f"{what}; found {found}")

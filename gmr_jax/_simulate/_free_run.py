@@ -106,6 +106,7 @@ def free_run(model: AbstractMechanicalModel, recording, *, columns: dict | None 
     k = sim_start(rec)
     if k:
         notes.append(f"started at sample {k} (v estimated from x: an interior estimate)")
+    _check_scale(model, rec, smooth_b, smooth_f)
     inp = sampled_spline(rec.t, smooth_b, smooth_f, model.n_dof)  # `place` moves x only: the inputs stand
     if integrator is None:
         integrator = SIM if 20 * rec.n_samples <= SIM.max_steps else Integrator(
@@ -139,6 +140,36 @@ def free_run(model: AbstractMechanicalModel, recording, *, columns: dict | None 
     stats = {"result": code_name(result), "message": "" if ok else f"{what}: {message(result)} [{code_name(result)}]",
              "steps": sol.stats.get("num_steps") if isinstance(sol.stats, dict) else None}
     return raise_if_failed(Solution(value=run, result=result, stats=stats), throw, what)
+
+
+#: `free_run` refuses a recording where the model's accelerations at its states are this many times its own (x''
+#: from x), RMS per DOF: the record is in other units than the model (audit: a chain model in m on a record in mm,
+#: a degree-11 law read 1000 x out, ran for over 10 minutes without an answer), or far from where the model holds.
+#: A model linear in x and v is unit-free (no guard needed there); clean built-in fits on their own records: <= 1.1.
+SCALE_LIMIT = 1e3
+
+
+def _check_scale(model, rec: Recording, b, f) -> None:
+    """`SCALE_LIMIT`'s refusal (GMRInputError naming the DOF, the factor and the fix), on up to 2000 recorded
+    states; records whose x'' is 0 (a constant DOF) are left to the run."""
+    import jax
+
+    from .._recordings._derivatives import differentiate
+
+    idx = np.unique(np.linspace(0, rec.n_samples - 1, min(rec.n_samples, 2000)).round().astype(int))
+    acc = np.asarray(jax.vmap(model.accelerations)(jnp.asarray(rec.x[idx]), jnp.asarray(rec.v[idx]),
+                                                   jnp.asarray(b[idx]), jnp.asarray(f[idx])))
+    own = differentiate(rec.x, rec.dt, 2)[idx]
+    for i in range(rec.n_dof):
+        m, r = float(np.sqrt(np.mean(acc[:, i] ** 2))), float(np.sqrt(np.mean(own[:, i] ** 2)))
+        if r > 0 and not m <= SCALE_LIMIT * r:  # NaN or inf included
+            lo, hi = float(rec.x[:, i].min()), float(rec.x[:, i].max())
+            raise GMRInputError(
+                f"free_run: the model's accelerations at {rec.name}'s recorded states are {m / r:.3g} times the "
+                f"record's own (x'' from x, RMS, DOF {i}; x from {lo:.4g} to {hi:.4g}): the recording is not in the "
+                f"units the model was fitted in (a record in mm for a model in m reads its law 1000 x out), or lies far "
+                f"from where the model holds; give the recording in the model's units (--columns 'x0=COLUMN*1e-3', "
+                f"or the unit in the CSV header, 'x0 [mm]')")
 
 
 def horizon_runs(model, inp, rec: Recording, start: int, integrator: Integrator, box):
