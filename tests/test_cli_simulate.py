@@ -122,3 +122,20 @@ def test_crossing_record_caveat_says_when_the_short_runs_fail_too():
     wrong = "\n".join(_horizon_lines(fr(0.735)))
     assert "off by 73.5 % too" in wrong and "does not follow this record" in wrong and "even with an exact" not in wrong
     assert SHORT_RUN_FAILS < 0.735
+
+
+def test_a_record_in_other_units_than_the_model_is_refused_at_once(case, capsys):
+    """The joint's truth (rad) on its record in mrad: the model's accelerations at the recorded states are ~1e6 x and
+    more the record's own; refused with the factor and the fix (audit: a chain model in m on a record in mm ran for
+    over ten minutes without an answer), by the API and by `gmr simulate` (exit status 2, one line)."""
+    import dataclasses
+
+    d, s, rec = case
+    milli = dataclasses.replace(rec, x=rec.x * 1e3, v=rec.v * 1e3, a=rec.a * 1e3, base_acc=rec.base_acc * 1e3)
+    with pytest.raises(g.GMRInputError, match=r"accelerations at .* are .* times the record's own .* not in the units"):
+        g.free_run(s.truth, milli)
+    g.save_recording(milli, d / "milli.npz")
+    capsys.readouterr()
+    assert main(["simulate", str(d / "truth.json"), str(d / "milli.npz"), "--out", str(d / "milli")]) == 2
+    err = capsys.readouterr().err
+    assert "not in the units the model was fitted in" in err and "Traceback" not in err
