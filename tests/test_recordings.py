@@ -1,3 +1,4 @@
+import dataclasses
 import warnings
 
 import numpy as np
@@ -577,6 +578,14 @@ def test_labelled_units_are_made_coherent(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         read("t,x,a [m/s^2]", a, a)  # nothing converted: silent
+    # which unit the lengths end in is said: the recording's length_unit (None: nothing labelled)
+    assert read("t,x [mm],v [mm/s],a [m/s²],base_acc [g]", a, a, a, b).length_unit == "mm"
+    assert read("t,x,a [m/s^2]", a, a).length_unit == "m" and read("t,x,a", a, a).length_unit is None
+    assert read("t,x [mm],f [kN],m [g]", a, b, np.full_like(t, 500.0)).length_unit == "m"  # SI with a force
+    mm = read("t,x [mm],a [mm/s^2],base_acc [mm/s^2]", a, a, b)
+    m = dataclasses.replace(read("t,x [m],a [m/s^2],base_acc [m/s^2]", a, a, b), name="other")
+    with pytest.raises(g.GMRInputError, match=r"lengths are in different units \(u: mm, other: m\)"):
+        g.reconstruct([mm, m])
     with pytest.raises(g.GMRInputError, match="the unit 'V' of column 'a0' is not one gmr_jax converts.*leave the "
                                               "unit out"):
         read("t,x,a [V]", a, a)

@@ -14,6 +14,7 @@ import numpy as np
 
 from .._errors import GMRInputError
 from .._model._metadata import fit_metadata
+from .._recordings._recording import length_unit
 from .._reconstruct._sanity import GMRDataWarning
 from ._args import add_columns_option, load_recordings, output_file, positive_int
 from ._progress import stage
@@ -87,6 +88,7 @@ def run(args) -> int:
     png = None if args.no_figure else figure_path(args.out, args.figure)  # a bad name fails before the fit
     stage(f"loading {len(args.recordings)} recording(s)")
     recs, load_warnings = load_recordings(args.recordings, args.columns)
+    unit = length_unit(recs)[0]  # refused by the fit where they differ; its warning comes with the fit's
     lib = gmr.Library(args.restoring_order, args.damping_order,
                       velocity_damping=not args.no_velocity_damping,
                       position_damping=not args.no_position_damping)
@@ -130,6 +132,9 @@ def run(args) -> int:
     gmr.save_model(model, args.out, **meta)
     ranges, routes, design = meta["data_range"], meta.get("coordination", []), meta.get("shared_design", [])
     print(f"{st['method']} model from {len(recs)} recording(s) -> {args.out}")
+    if unit is not None:
+        print(f"  lengths in {unit} (x, v and a per s, per s^2; from the files' headers): the model's coefficients, "
+              f"wells and ranges are in {unit}")
     for line in _term_table(model, {"terms": model.terms()}, 4):  # equations, coefficients, std. errors
         print(line)
     from .._reconstruct._sanity import restoring_uncertainty

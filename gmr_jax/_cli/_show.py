@@ -241,6 +241,10 @@ def _describe(model, d: dict, name: str, p: int) -> str:
         libs = (f"; local-fit library r={lib.get('r')}, d={lib.get('d')} (the local Taylor fits' orders; the global "
                 f"restoring law's degree, per DOF: {', '.join(map(str, degrees))})" if isinstance(lib, dict) else "")
         out.append(f"method: {method or 'not recorded'}{libs}")
+    units = d.get("units")
+    if isinstance(units, dict) and units.get("length"):
+        out.append(f"lengths in {units['length']} (from the recordings' headers: the coefficients, wells, ranges and "
+                   f"barriers are in {units['length']} and s)")
 
     out += ["", "Equations (force of each DOF, model units):"] + _term_table(model, d, p)
 

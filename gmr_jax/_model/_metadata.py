@@ -57,7 +57,7 @@ def fit_metadata(stats: dict) -> dict:
     lib = stats.get("library")
     if lib is not None and hasattr(lib, "restoring_order"):
         meta["library"] = {"r": lib.restoring_order, "d": lib.damping_order}
-    for key in ("training", "data_range", "speed_range"):
+    for key in ("training", "data_range", "speed_range", "units"):
         if key in stats:
             meta[key] = stats[key]
     if "warnings" in stats:

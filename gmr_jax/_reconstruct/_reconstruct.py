@@ -28,7 +28,7 @@ from .._fit._threshold import default_thresholds, select_threshold
 from .._model._model import GlobalModel
 from .._model._predict import forces
 from .._recordings._derivatives import TONAL, band_edge, tonal_fraction
-from .._recordings._recording import Recording, validate
+from .._recordings._recording import Recording, length_unit, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
 from . import (
@@ -107,7 +107,7 @@ def _resolve(recordings, masses, topology, min_recordings=2, what="fit", exclude
         if r.n_dof != d:
             raise GMRInputError(f"{r.name}: has {r.n_dof} DOFs but {recs[0].name} has {d}")
     topology = as_topology(("chain" if d > 1 else "independent") if topology is None else topology)
-    warnings = []
+    warnings = [why] if (why := length_unit(recs)[1]) else []  # refused where the files' units differ
     if masses is None:
         _sanity.check_masses([r.name for r in recs], [r.masses for r in recs])
         found = [r.masses for r in recs if r.masses is not None]
@@ -247,6 +247,9 @@ def _solution(model, failure: _Failure, method, library, reports, training, warn
     stats = {"method": method, "library": library, "dofs": reports, "training": training,
              "warnings": warnings, "failure": failure.detail,
              "data_range": ranges(recs, "x"), "speed_range": ranges(recs, "v")}
+    unit = length_unit(recs)[0]
+    if unit is not None:
+        stats["units"] = {"length": unit}  # from the files' headers
     return Solution(value=model, result=failure.code, stats=stats)
 
 

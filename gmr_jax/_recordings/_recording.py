@@ -52,6 +52,9 @@ class Recording:
     equilibrium: np.ndarray | None = None
     integration: dict | None = field(default=None, compare=False)
     derivation: dict | None = field(default=None, compare=False)
+    #: the unit of its lengths where its file's header named one ("mm": x, v, a, base_acc are in mm, mm/s, mm/s^2);
+    #: None: as given (no unit in the file)
+    length_unit: str | None = field(default=None, compare=False)
 
     def __post_init__(self):
         for key in SIGNALS:  # lists and tuples of numbers (a notebook's data, ints included) as float arrays
@@ -467,9 +470,9 @@ def _read_csv(path: Path, src: str, raw: bool = False):
     expected = ("t, x0.. (one per DOF; or v0.. or a0.. alone), optional v0.., a0.., f0.., base_acc, m0.. (masses), "
                 "equilibrium0.. (one DOF: x, v, a, f or force, m or mass, equilibrium also read as x0, v0, a0, f0, m0, "
                 "equilibrium0)")
-    t_scale, scales = 1.0, [1.0] * len(header)
+    t_scale, scales, unit = 1.0, [1.0] * len(header), None
     if not raw:  # the names a one-DOF lab file uses (and the NPZ keys), in any case, with a unit: "v [m/s]"
-        header, t_scale, scales = _standard_names(header, src)
+        header, t_scale, scales, unit = _standard_names(header, src)
 
     unknown = [] if raw else [h for h in header if not _signal_name(h)]
     if unknown or (not raw and ("t" not in header or not {"x0", "v0", "a0"} & set(header))):
@@ -526,7 +529,8 @@ def _read_csv(path: Path, src: str, raw: bool = False):
     if masses is not None:
         masses = repeated_value(masses, "masses", "the mass column", src)
     return Recording(t=col["t"] * t_scale, x=group("x"), v=group("v"), a=group("a"),
-                     base_acc=col.get("base_acc"), force=group("f"), name=path.stem, equilibrium=eq, masses=masses)
+                     base_acc=col.get("base_acc"), force=group("f"), name=path.stem, equilibrium=eq, masses=masses,
+                     length_unit=unit)
 
 
 #: a time column's unit in a CSV header ("t [ms]"): its factor to seconds
@@ -588,7 +592,7 @@ def _unit_factor(kind: str, unit: str, column: str, src: str) -> tuple[str, floa
     return found
 
 
-def _column_scales(names, units, src, labels=None) -> list[float]:
+def _column_scales(names, units, src, labels=None) -> tuple[list[float], str | None]:
     """Factors that bring a CSV's labelled columns to one coherent set of units: lengths (and 'g') to the first
     labelled kinematic column's length unit, or to m where a force or mass column carries a unit (then N and kg,
     coherent with m and s); unlabelled columns are taken as they are. An accelerometer in g becomes m/s^2 (audit:
@@ -596,7 +600,7 @@ def _column_scales(names, units, src, labels=None) -> list[float]:
     kind_of = {n: re.sub(r"\d+$", "", n) for n in names}
     parsed = {n: _unit_factor(kind_of[n], u, n, src) for n, u in zip(names, units) if u is not None and n != "t"}
     if not parsed:
-        return [1.0] * len(names)
+        return [1.0] * len(names), None
     families = {fam for fam, _ in parsed.values() if fam in ("length", "angle")}
     if len(families) > 1:
         raise GMRInputError(f"{src}: the header mixes lengths and angles ({', '.join(f'{n} [{u}]' for n, u in zip(names, units) if u)}); "
@@ -610,19 +614,19 @@ def _column_scales(names, units, src, labels=None) -> list[float]:
     scales = [1.0 if n not in parsed else parsed[n][1] / (ref if parsed[n][0] in ("length", "angle", "g") else 1.0)
               for n in names]
     labels = names if labels is None else labels  # the file's own header cells, for the message
+    table = ANGLE_UNITS if ref_name is not None and parsed[ref_name][0] == "angle" else LENGTH_UNITS
+    unit = next(k for k, f in table.items() if f == ref)  # the file's lengths (or angles) are now in this unit
     converted = [h for n, h, f in zip(names, labels, scales) if n in parsed and f != 1.0]
     bare = [h for n, h in zip(names, labels)
             if n not in parsed and n != "t" and kind_of[n] in ("x", "v", "a", "base_acc", "equilibrium")]
     if converted and bare:
         # audit: 'a0 [g]' labelled, x unlabelled in mm: a was made m/s^2 and x taken as m, 1000x apart, unsaid
-        table = ANGLE_UNITS if ref_name is not None and parsed[ref_name][0] == "angle" else LENGTH_UNITS
-        unit = next(k for k, f in table.items() if f == ref)
         warnings.warn(f"{src}: {', '.join(converted)} converted to {unit} (per s, per s^2), but {', '.join(bare)} "
                       f"carr{'ies' if len(bare) == 1 else 'y'} no unit and {'is' if len(bare) == 1 else 'are'} taken "
                       f"as {'it is' if len(bare) == 1 else 'they are'}, in {unit}: if not, label "
                       f"{'it' if len(bare) == 1 else 'them'} in the header ('x0 [mm]', 'base_acc [g]')",
                       GMRDataWarning, stacklevel=4)
-    return scales
+    return scales, unit
 
 
 def _standard_names(header, src):
@@ -631,7 +635,8 @@ def _standard_names(header, src):
     one-DOF names (`x`, `v`, `a`, `f`, `force`, `m`, `mass`, `masses`, `equilibrium`) as `x0`, `m0`, ... The time
     column's unit, where given, scales it to seconds (`TIME_UNITS`); the other labelled columns are brought to one
     coherent set of units (`_column_scales`; the model is in the file's length unit, or SI where a force or mass is
-    labelled). Returns the names, the factor of t and the factor of every column."""
+    labelled). Returns the names, the factor of t, the factor of every column and the unit the lengths are now in
+    (None: no unit labelled)."""
     out, units, t_scale = [], [], 1.0
     for h in header:
         m = _UNIT.match(h)
@@ -649,10 +654,10 @@ def _standard_names(header, src):
         out.append(name)
         units.append(unit or None)
     known = [_signal_name(n) for n in out]
-    scales = _column_scales([n for n, k in zip(out, known) if k], [u for u, k in zip(units, known) if k], src,
-                            [h.strip() for h, k in zip(header, known) if k])
+    scales, unit = _column_scales([n for n, k in zip(out, known) if k], [u for u, k in zip(units, known) if k], src,
+                                  [h.strip() for h, k in zip(header, known) if k])
     it = iter(scales)
-    return out, t_scale, [next(it) if k else 1.0 for k in known]
+    return out, t_scale, [next(it) if k else 1.0 for k in known], unit
 
 
 def _read_npz(path: Path, src: str, raw: bool = False):
@@ -734,3 +739,21 @@ def load_recording(path, columns: dict | None = None) -> Recording:
             msg = msg[len(path.stem) + 2:]
         raise GMRInputError(msg if msg.startswith(src) else f"{src}: {msg}") from None
     return validate(rec, src)
+
+
+def length_unit(recs) -> tuple[str | None, str | None]:
+    """The unit of the recordings' lengths where their files' headers named one (`Recording.length_unit`), and a
+    warning where some named none. Recordings in different units are refused: one fit takes every file's numbers
+    as one set of units (audit: which unit a file's lengths end in depends on which columns carry a label, and
+    nothing said which)."""
+    named = {r.name: r.length_unit for r in recs if r.length_unit is not None}
+    if len(set(named.values())) > 1:
+        raise GMRInputError("the recordings' lengths are in different units ("
+                            + ", ".join(f"{n}: {u}" for n, u in named.items()) + "): one fit takes them as one set; "
+                            "label every file's columns alike (e.g. 'x0 [mm]' in each), or convert them")
+    if not named:
+        return None, None
+    unit = next(iter(named.values()))
+    bare = [r.name for r in recs if r.length_unit is None]
+    return unit, (f"{', '.join(bare)} carr{'ies' if len(bare) == 1 else 'y'} no unit in the header while the other "
+                  f"files are in {unit}: taken as {unit} too" if bare else None)
