@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._coordination._coordinate import GlobalCoefficients, coordinate, split_flat
-from .._coordination._discrepancy import add_discrepancy, calibrate_covariance
+from .._coordination._discrepancy import add_discrepancy, calibrate_covariance, discrepancy
 from .._coordination._joint import CONFLICT as JOINT_CONFLICT
 from .._coordination._joint import (
     JointSettings,
@@ -550,6 +550,34 @@ def _calibrated(coord: Solution, fits: LocalFit, library: Library, route: str, p
     return g, cov
 
 
+def _systematic(coord: Solution, fits: LocalFit, library: Library, route: str, confining: bool, cov) -> np.ndarray | None:
+    """The part of a DOF's calibrated covariance `cov` that is its restoring law's embedded error (`_discrepancy`:
+    the interpolant's difference from its neighbours in the degree sequence, from this DOF's local Taylor data), as
+    sum d d' on the restoring block: systematic, shared by cells of one design whose laws are interpolated alike
+    (`_design_law`). None where `cov` does not hold it whole (cov minus it not positive semi-definite: an averaged
+    or a joint law without the paper route's discrepancy)."""
+    cap = coord.stats.get("max_degree_r")
+    method = "hermite" if route == "hermite" else "gls"
+    try:
+        vectors = discrepancy(fits, library, method=method, confining=confining,
+                              max_degree=None if cap is None else jnp.asarray(int(cap)))["restoring"][0]
+    except Exception:  # noqa: BLE001 - a discrepancy that cannot be formed: nothing known to be systematic
+        return None
+    cov = np.asarray(cov, float)
+    out = np.zeros_like(cov)
+    for d in vectors:
+        full = np.zeros(cov.shape[0])
+        if d.size > cov.shape[0]:
+            return None
+        full[: d.size] = d
+        out += np.outer(full, full)
+    rest = cov - out
+    if not np.all(np.isfinite(rest)) or np.linalg.eigvalsh(0.5 * (rest + rest.T)).min() < -1e-9 * max(
+            float(np.trace(np.abs(cov))), 1e-300):
+        return None
+    return out
+
+
 def _truncation_degree(coord: Solution, fits: LocalFit, xs, vs, ys, w, library: Library, band=None):
     """The paper route's restoring degree chosen from the local fits one restoring order higher
     (`_truncation.with_truncation`: where the next Taylor term biases the kept ones, the chi-squared test
@@ -740,7 +768,7 @@ def _borrow(fits: LocalFit, plan: list[dict], xs, vs, ys, w, library: Library, x
 DESIGN_NARROWING = 3.0
 
 
-def _pool_laws(stiff: list, vdamp: list, pdamp: list, covs: list, reports: list, recs) -> list[str]:
+def _pool_laws(stiff: list, vdamp: list, pdamp: list, covs: list, reports: list, recs, noise=None) -> list[str]:
     """`_design_law.pool_design_laws` on every DOF's law and calibrated covariance, in place; the
     outcome per DOF goes to `reports[i].stats["shared_design"]["law"]`. Returns the warnings of the DOFs whose band
     between the wells the pooling narrowed by more than `DESIGN_NARROWING` (audit, a 3-cell chain of tanh-law cells
@@ -757,7 +785,8 @@ def _pool_laws(stiff: list, vdamp: list, pdamp: list, covs: list, reports: list,
                                                       max(float(r.x[:, i].max()) for r in recs)]])
               for i in range(len(flats))]  # where each DOF's wells are looked for
     new_f, new_c, law = _design_law.pool_design_laws([flats[i] for i in idx], [sizes[i][0] for i in idx],
-                                                     [covs[i] for i in idx], [ranges[i] for i in idx])
+                                                     [covs[i] for i in idx], [ranges[i] for i in idx],
+                                                     None if noise is None else [noise[i] for i in idx])
     members = [idx[k] for k in law["members"]]
     for k, i in enumerate(idx):
         ns, nv, _ = sizes[i]
@@ -981,6 +1010,7 @@ def reconstruct(
     # an x integrated from v or a: the slow shift its drift removal took, restored (`_slow`)
     recs = [restore_slow(r, y) for r, y in zip(recs, targets)]
     stiff, vdamp, pdamp, se_s, se_v, se_p, covs, reports = [], [], [], [], [], [], [], []
+    noise_covs = []  # per DOF, the calibrated covariance less its restoring law's embedded error (`_systematic`)
     k1 = library.column(STIFFNESS, 1)  # restoring_order >= 1 (`Library`)
     local, noises, x_noises, row_filters, segs_all, gains, v_noises = [], [], [], [], [], [], []
     for i in range(d):
@@ -1132,6 +1162,7 @@ def reconstruct(
                 float(xall.max()))
         # a DOF that borrowed was coordinated with odd degrees only: its discrepancy is that degree choice's
         g, cov_i = _calibrated(coord, fits, library, route, paper_sound, confining or any(borrowed))
+        systematic = _systematic(coord, fits, library, route, confining or any(borrowed), cov_i)
         # a well that fixes the damping's value only: the slope it leaves open, in the band (`_damping_slopes`);
         # not where the joint regression fitted the damping to every well's data with its own position terms
         # (magnet, 0.05 sweeps, 60 dB: the joint's constant C, band 0.056 % wide, would be 2.96 % wide)
@@ -1155,6 +1186,7 @@ def reconstruct(
         warnings += _sanity.check_band(i, np.asarray(g.stiffness), cov_i, noise_rel, float(xall.min()),
                                        float(xall.max()))  # rule 11b: the band written with the model
         covs.append(cov_i)
+        noise_covs.append(None if systematic is None else cov_i - systematic)
         stiff.append(np.asarray(g.stiffness)), vdamp.append(np.asarray(g.velocity_damping))
         pdamp.append(np.asarray(g.position_damping))
         se_s.append(np.asarray(se.stiffness)), se_v.append(np.asarray(se.velocity_damping))
@@ -1178,7 +1210,7 @@ def reconstruct(
     other_designs = design is not None and design["tau"] is not None and design["tau"] > _shape_prior.TAU_MAX
     if shared_design and d > 1 and not other_designs:
         say("cells of one design: their laws between the wells pooled")
-        warnings += _pool_laws(stiff, vdamp, pdamp, covs, reports, recs)
+        warnings += _pool_laws(stiff, vdamp, pdamp, covs, reports, recs, noise_covs)
     say("training scores, sanity checks, resolution report")
     stderr = {STIFFNESS: jnp.asarray(stack_padded(se_s)), VELOCITY_DAMPING: jnp.asarray(stack_padded(se_v)),
               POSITION_DAMPING: jnp.asarray(stack_padded(se_p))}
