@@ -109,23 +109,6 @@ def _chi2_p(values, j, members, tau, level):
     return chi2, float(jsp.gammaincc(NODES.size / 2, chi2 / 2))
 
 
-def _systematic_shares(members, covariances, noise, maps, stiffness) -> dict:
-    """Per member, the share kappa_j = min_i q_i / q_j (<= 1) of its systematic covariance that pooling leaves it,
-    q the mean variance of a member's systematic part over the nodes (relative to its s): the design's shape is known
-    no better than its best-known member knows it (a base cell whose records cross between the wells measured it; a
-    design no member measured keeps its error whole). None for every member where any lacks a `noise` part (all of
-    its covariance counts as noise: the pooled covariance as before)."""
-    q = {}
-    for j in members:
-        nz = None if noise is None or noise[j] is None else np.asarray(noise[j], float)
-        if nz is None or nz.shape != covariances[j].shape:
-            return {j: None for j in members}
-        ns = stiffness[j].size
-        q[j] = max(float(np.mean(np.diag(maps[j] @ (covariances[j] - nz)[:ns, :ns] @ maps[j].T))), 0.0)
-    low = min(q.values())
-    return {j: (1.0 if q[j] <= low else low / q[j]) for j in members}
-
-
 def pool_design_laws(flats: list, n_restoring: list, covariances: list, regions: list, noise: list | None = None):
     """The rule of the module docstring for the DOFs of one chain.
 
@@ -136,11 +119,10 @@ def pool_design_laws(flats: list, n_restoring: list, covariances: list, regions:
 
     `noise`: per DOF, its covariance less the part that is systematic (its restoring law's embedded error,
     `_reconstruct._systematic`; None: all of it counts). Cells of one design interpolated alike from the same
-    Taylor orders err alike, so their agreement says nothing of that error: the pooled covariance keeps it down to
-    the level of the member that knows the shape best (`_systematic_shares`) and conditions the rest on the others'
-    prior (audit: a 3-cell chain of tanh-law cells, 60 dB; two cells' laws 17 and 28 % off agreed with each other
-    to 0.2 %, and pooled on their whole covariances the bands fell from +-54 / 109 % to +-3.5 %, the truth inside on
-    16-30 % of the span). The means move as before.
+    Taylor orders err alike, so their agreement says nothing of that error: the pooled covariance keeps it whole
+    and conditions the rest on the others' prior (audit: a 3-cell chain of tanh-law cells, 60 dB; two cells' laws
+    17 and 28 % off agreed with each other to 0.2 %, and pooled on their whole covariances the bands fell from
+    +-54 / 109 % to +-3.5 %, the truth inside on 16-30 % of the span). The means move as before.
 
     **Returns:** `(flats, covariances, summary)`: the updated lists (unchanged where a DOF was not
     pooled; the damping moves only through its covariance with the restoring law) and `summary`
@@ -203,7 +185,6 @@ def pool_design_laws(flats: list, n_restoring: list, covariances: list, regions:
             summary["members"] = []
             return flats, covariances, summary
     priors = {j: _prior(values, j, members, tau, level) for j in members}
-    kappa = _systematic_shares(members, covariances, noise, maps, stiffness)
     out_f, out_c = list(flats), list(covariances)
     for j in members:
         mean, cov_p = priors[j]
@@ -225,13 +206,12 @@ def pool_design_laws(flats: list, n_restoring: list, covariances: list, regions:
         gain = np.linalg.solve(s, innov.T).T
         resid = mean - g
         new = flats[j] + np.where(own, gain @ resid, 0.0)
-        if kappa[j] is None:
+        nz = None if noise is None or noise[j] is None else np.asarray(noise[j], float)
+        if nz is None or nz.shape != covariances[j].shape:
             new_cov = covariances[j] - gain @ innov.T
-        else:  # the systematic part down to the best-known member's, the rest conditioned on the same prior
-            nz = np.asarray(noise[j], float)
+        else:  # the systematic part kept whole, the rest conditioned on the same prior
             innov_n = nz @ h.T
-            new_cov = (nz - np.linalg.solve(h @ innov_n + cov_p, innov_n.T).T @ innov_n.T
-                       + kappa[j] * (covariances[j] - nz))
+            new_cov = covariances[j] - np.linalg.solve(h @ innov_n + cov_p, innov_n.T).T @ innov_n.T
         new_cov = 0.5 * (new_cov + new_cov.T)
         chi2 = float(resid @ np.linalg.solve(s, resid))
         # the pooled law must not lose admissibility it had (a leading term's sign, a sign change): compared
