@@ -6,13 +6,16 @@ well, the coordination then takes its coefficient as exactly zero, and the band 
 the viscous coefficient's (audit, a tri-stable quintic with (0.2 + 1400 x^2) v + 2 v^3 damping, x v a at 60 dB,
 records at |v| <= 0.04: the damping at |v| = 0.4 2.6 x too low, the truth ~500 band half-widths away, no warning).
 
-Each well that keeps a damping term is refitted with the dropped order j in its support, in place of any velocity
-power above 1 it kept (collinear stand-ins at small speeds; `_local_rules._refit_on`, the other kept terms exempt
-from the threshold); the wells' velocity laws (one law, shared by the wells) are pooled with inverse-variance
-weights, B_j = c_j +- s_j. The band holds the difference of that alternative law from the model's and s_j^2 on B_j
-(a threshold's choice, as `_damping_slopes` enters the slope a well left open); the model's mean is unchanged. `reconstruct` warns (rule 14b, `_sanity.check_unresolved_damping`) where that term
-can change the damping by more than `_sanity.DAMPING_SPREAD` below the model's speed bound. Only on the paper
-route's damping: the joint regression's candidates hold these orders and its own choice enters its band (rule 14).
+Each well that keeps a damping term is refitted with the dropped order j added to its support, or in place of the
+velocity powers above 1 it kept where those stay within `SWAP_T` standard errors of 0 beside it (collinear
+stand-ins at small speeds; `_local_rules._refit_on`, the other kept terms exempt from the threshold). The wells'
+velocity laws (one law, shared by the wells) are pooled with inverse-variance weights of B_j = c_j +- s_j. The band
+holds that alternative law's difference from the model's and s_j^2 on B_j (a threshold's choice, as
+`_damping_slopes` enters the slope a well left open); the model's mean is unchanged. `reconstruct` warns (rule 14b,
+`_sanity.check_unresolved_damping`) where the alternative parts from the model's damping by more than
+`_sanity.DAMPING_SPREAD` below the speed of a fall from the highest barrier (`_sanity.crossing_speed`). Only on the
+paper route's damping: the joint regression's candidates hold these orders and its own choice enters its band
+(rule 14).
 """
 
 import numpy as np
