@@ -1010,7 +1010,7 @@ def reconstruct(
     # an x integrated from v or a: the slow shift its drift removal took, restored (`_slow`)
     recs = [restore_slow(r, y) for r, y in zip(recs, targets)]
     stiff, vdamp, pdamp, se_s, se_v, se_p, covs, reports = [], [], [], [], [], [], [], []
-    noise_covs = []  # per DOF, the calibrated covariance less its restoring law's embedded error (`_systematic`)
+    systematic_of = []  # per DOF, what `_systematic` needs (computed only where cells are pooled)
     k1 = library.column(STIFFNESS, 1)  # restoring_order >= 1 (`Library`)
     local, noises, x_noises, row_filters, segs_all, gains, v_noises = [], [], [], [], [], [], []
     for i in range(d):
@@ -1162,7 +1162,6 @@ def reconstruct(
                 float(xall.max()))
         # a DOF that borrowed was coordinated with odd degrees only: its discrepancy is that degree choice's
         g, cov_i = _calibrated(coord, fits, library, route, paper_sound, confining or any(borrowed))
-        systematic = _systematic(coord, fits, library, route, confining or any(borrowed), cov_i)
         # a well that fixes the damping's value only: the slope it leaves open, in the band (`_damping_slopes`);
         # not where the joint regression fitted the damping to every well's data with its own position terms
         # (magnet, 0.05 sweeps, 60 dB: the joint's constant C, band 0.056 % wide, would be 2.96 % wide)
@@ -1186,7 +1185,7 @@ def reconstruct(
         warnings += _sanity.check_band(i, np.asarray(g.stiffness), cov_i, noise_rel, float(xall.min()),
                                        float(xall.max()))  # rule 11b: the band written with the model
         covs.append(cov_i)
-        noise_covs.append(None if systematic is None else cov_i - systematic)
+        systematic_of.append((coord, fits, route, confining or any(borrowed)))  # `_systematic`, where pooled
         stiff.append(np.asarray(g.stiffness)), vdamp.append(np.asarray(g.velocity_damping))
         pdamp.append(np.asarray(g.position_damping))
         se_s.append(np.asarray(se.stiffness)), se_v.append(np.asarray(se.velocity_damping))
@@ -1210,6 +1209,10 @@ def reconstruct(
     other_designs = design is not None and design["tau"] is not None and design["tau"] > _shape_prior.TAU_MAX
     if shared_design and d > 1 and not other_designs:
         say("cells of one design: their laws between the wells pooled")
+        noise_covs = []  # per DOF, the calibrated covariance less its restoring law's embedded error
+        for (c_, f_, r_, conf_), cov_ in zip(systematic_of, covs):
+            sys_ = _systematic(c_, f_, library, r_, conf_, cov_)
+            noise_covs.append(None if sys_ is None else cov_ - sys_)
         warnings += _pool_laws(stiff, vdamp, pdamp, covs, reports, recs, noise_covs)
     say("training scores, sanity checks, resolution report")
     stderr = {STIFFNESS: jnp.asarray(stack_padded(se_s)), VELOCITY_DAMPING: jnp.asarray(stack_padded(se_v)),
