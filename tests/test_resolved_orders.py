@@ -212,6 +212,7 @@ def _noisy_high_orders(c, rel4, z, lib):
     return fits, truth
 
 
+@pytest.mark.slow  # 9-12 s: the default tier's 5 min (stop 51); CI runs the slow tier too
 def test_least_risk_estimate_of_a_lower_degree_is_unbiased():
     # `least_risk_degree` rests on: the degree-7 GLS law is the projection of the exact nonic, so
     # (F_7 - F_9)^2 - var F_9 + 2 var F_7 estimates E (F_7 - F)^2 without bias. Monte Carlo over the

@@ -285,6 +285,7 @@ def test_9_global_shape_outside_and_between_the_data(nes_swinging):
                                       np.array([190.0, 157.0, 155.0])) == []
 
 
+@pytest.mark.slow  # 9-12 s: the default tier's 5 min (stop 51); CI runs the slow tier too
 def test_10_default_orders_on_sinusoidal_records(joint, monkeypatch):
     """Displacement-only records of a steady 10 Hz sine. On the raw library columns (the local fits
     before `_filter_gain.filter_gain`) the default (5, 5) library gives an 11th-degree global law that blows

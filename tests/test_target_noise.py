@@ -164,6 +164,7 @@ def test_row_filter_keeps_an_exact_equation_and_drops_the_padded_ends():
     assert abs(np.std(yn[wn > 0]) / np.linalg.norm(rows.taps) - 1) < 0.15
 
 
+@pytest.mark.slow  # 9-12 s: the default tier's 5 min (stop 51); CI runs the slow tier too
 def test_structured_noise_reaches_the_curvature_oracle_from_displacement_only():
     """Shallow arch excited at 0.45 % of its interwell distance, displacement only: with the
     accelerations' noise taken for what it is, the curvature resolved at each well and the joint
