@@ -42,10 +42,10 @@ def unresolved_orders(fits, xs, vs, ys, w, library: Library, solver, velocity_da
     the velocity orders above 1 it kept stays within `SWAP_T` standard errors of 0 beside it, with sgn(v)|v|^j in
     their place (`replaced`: on a few percent of the crossing speeds every power of v is the others' stand-in: a
     kept 411 sgn(v)|v|^4 for the truth's 5 v^3 damps 2.6 x too hard at a crossing; the joint's kept 10 v^3 stays,
-    t > 100 beside v|v|); the wells'
-    velocity laws are pooled with inverse-variance weights of their c_j: `c_j` +- `s_j`, and `delta` the pooled
-    change of the wells' velocity laws, on the model's `velocity_damping` block (the alternative the band holds). Wells without a damping term, or
-    whose refit failed, give none. Other arguments as `_local_rules._refit_on` takes them."""
+    t > 100 beside v|v|); the wells' velocity laws are pooled with inverse-variance weights of their c_j: `c_j`
+    +- `s_j`, and `delta` the pooled change of the wells' velocity laws, on the model's `velocity_damping` block
+    (the alternative the band holds). Wells without a damping term, or whose refit failed, give none. Other
+    arguments as `_local_rules._refit_on` takes them."""
     terms = library.terms()
     coef = np.asarray(fits.coef)
     damping = np.array([phys != STIFFNESS for phys, _ in terms])

@@ -367,7 +367,8 @@ def _base_scale(name: str, i: int, x, rec, dt: float, w: int) -> str | None:
     except np.linalg.LinAlgError:
         return None
     alpha, se = float(coef[0]), float(np.sqrt(max(var, 0.0)))
-    if not np.isfinite(alpha) or not (alpha - BASE_SIGMAS * se > -1 / BASE_FACTOR or alpha + BASE_SIGMAS * se < -BASE_FACTOR):
+    outside = alpha - BASE_SIGMAS * se > -1 / BASE_FACTOR or alpha + BASE_SIGMAS * se < -BASE_FACTOR
+    if not np.isfinite(alpha) or not outside:
         return None
     s = -alpha
     head = (f"{name}: the base acceleration enters the second derivative of DOF {i}'s x with the factor {alpha:.4g} "
@@ -845,9 +846,9 @@ def check_unresolved_damping(dof: int, velocity_damping, position_damping, found
                              speed: float, x_lo: float, x_hi: float) -> list[str]:
     """Rule 14b: a velocity term no well kept (`_damping_orders.unresolved_orders`: order j, its pooled refitted
     coefficient c_j +- s_j, the alternative law's difference `delta`) whose law parts from the model's by more than
-    `DAMPING_SPREAD` of the model's largest damping force (|delta . phi| + 2 s_j |v|^j) over the span [x_lo, x_hi] at some |v| below `speed` (`crossing_speed`: a fall
-    from the highest barrier to the lowest well), where that speed is beyond twice the recorded one: the paper
-    route's counterpart of rule 14. One message for the orders that matter. Audit (tri-stable quintic, true
+    `DAMPING_SPREAD` of the model's largest damping force (|delta . phi| + 2 s_j |v|^j) over the span [x_lo, x_hi]
+    at some |v| below `speed` (`crossing_speed`: a fall from the highest barrier to the lowest well), where that
+    speed is beyond twice the recorded one: the paper route's counterpart of rule 14. One message for the orders that matter. Audit (tri-stable quintic, true
     2 v^3 beside (0.2 + 1400 x^2) v, x v a at 60 dB, records at |v| <= 0.04): v^3 dropped at every well, the damping
     at |v| = 0.4 2.6 x too low with a band of +-0.3 %, no warning."""
     if not found or not speed > 2.0 * recorded_speed or not (np.isfinite(x_lo) and np.isfinite(x_hi)):
