@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int, PRNGKeyArray
 
-from .._coordination._joint import damping_faults
+from .._coordination._joint import damping_faults, fall_speed
 from .._errors import GMRInputError
 from .._model._model import GlobalModel
 from .._model._uncertainty import sample_models
@@ -49,11 +49,7 @@ def feeds_energy(model: GlobalModel, wells: np.ndarray, x_range) -> list[str]:
         w = w[np.isfinite(w)]
         if w.size == 0:
             continue
-        xs = np.linspace(*x_range[i], 401)
-        antider = np.polynomial.polynomial.polyint(np.asarray(model.stiffness[i], float))
-        drop = float(np.max(np.polynomial.polynomial.polyval(xs, antider))
-                     - np.min(np.polynomial.polynomial.polyval(w, antider)))
-        speed = float(np.sqrt(2.0 * max(drop, 0.0) / float(model.masses[i])))
+        speed = fall_speed(model.stiffness[i], w, float(model.masses[i]), *x_range[i])
         if not speed > 0:
             continue
         span = w if w.size > 1 else x_range[i]

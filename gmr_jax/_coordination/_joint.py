@@ -793,6 +793,16 @@ def _restoring_faults(stiffness, equilibria) -> list[tuple[tuple[str, int], str]
     return out
 
 
+def fall_speed(stiffness, wells, mass: float, lo: float, hi: float, n: int = 401) -> float:
+    """The speed of a fall from the highest point of the potential V = int F dx on [lo, hi] (`n` points) to the
+    lowest of `wells`, sqrt(2 (max V - min V_well) / m): the speeds a law of one DOF is used at without forcing
+    (the bound `damping_faults` checks up to); 0 where no point lies above the wells."""
+    antider = np.polynomial.polynomial.polyint(np.asarray(stiffness, float))
+    drop = float(np.max(np.polynomial.polynomial.polyval(np.linspace(lo, hi, n), antider))
+                 - np.min(np.polynomial.polynomial.polyval(np.asarray(wells, float), antider)))
+    return float(np.sqrt(2.0 * max(drop, 0.0) / mass))
+
+
 def damping_faults(velocity_damping, position_damping, equilibria, speed: float) -> list[str]:
     """Why a global damping law of one DOF is not admissible, or []: it must dissipate,
     D(x, v) v >= 0 (within `DISSIPATION_TOLERANCE`) and not identically 0, over the span of use

@@ -16,6 +16,7 @@ from .._coordination._joint import (
     JointSettings,
     RowFilter,
     damping_faults,
+    fall_speed,
     joint_coordinate,
     restoring_faults,
     row_filter,
@@ -1307,11 +1308,7 @@ def _baseline_faults(model: GlobalModel, recs) -> list[str]:
         wells = np.array([means[labels == k].mean() for k in range(labels.max() + 1)])
         k = np.asarray(model.stiffness[i], float)
         half = 0.5 * (wells.max() - wells.min())
-        antider = np.polynomial.polynomial.polyint(k)
-        xs = np.linspace(wells.min() - half, wells.max() + half, 401)
-        drop = float(np.max(np.polynomial.polynomial.polyval(xs, antider))
-                     - np.min(np.polynomial.polynomial.polyval(wells, antider)))
-        speed = float(np.sqrt(2.0 * max(drop, 0.0) / float(model.masses[i])))
+        speed = fall_speed(k, wells, float(model.masses[i]), wells.min() - half, wells.max() + half)
         why = restoring_faults(k, wells)
         if speed > 0:
             why += damping_faults(np.asarray(model.velocity_damping[i]), np.asarray(model.position_damping[i]), wells,

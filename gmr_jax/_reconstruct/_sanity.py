@@ -19,6 +19,7 @@ from itertools import pairwise
 import numpy as np
 
 from .._errors import GMRDataWarning as GMRDataWarning  # noqa: F401  (re-exported)
+from .._coordination._joint import fall_speed
 from .._errors import GMRInputError
 from .._fit._library import damping_columns
 
@@ -834,12 +835,7 @@ def crossing_speed(stiffness, equilibria, mass: float) -> float:
     lowest well, sqrt(2 (max V - min V_well) / m): what a crossing between wells reaches without forcing (0 for
     fewer than two wells)."""
     eq = np.sort(np.asarray(equilibria, float))
-    if eq.size < 2:
-        return 0.0
-    antider = np.polynomial.polynomial.polyint(np.asarray(stiffness, float))
-    top = float(np.max(np.polynomial.polynomial.polyval(np.linspace(eq[0], eq[-1], 801), antider)))
-    drop = top - float(np.min(np.polynomial.polynomial.polyval(eq, antider)))
-    return float(np.sqrt(2.0 * max(drop, 0.0) / mass))
+    return 0.0 if eq.size < 2 else fall_speed(stiffness, eq, mass, eq[0], eq[-1], 801)
 
 
 def check_unresolved_damping(dof: int, velocity_damping, position_damping, found: dict, recorded_speed: float,
@@ -848,9 +844,10 @@ def check_unresolved_damping(dof: int, velocity_damping, position_damping, found
     coefficient c_j +- s_j, the alternative law's difference `delta`) whose law parts from the model's by more than
     `DAMPING_SPREAD` of the model's largest damping force (|delta . phi| + 2 s_j |v|^j) over the span [x_lo, x_hi]
     at some |v| below `speed` (`crossing_speed`: a fall from the highest barrier to the lowest well), where that
-    speed is beyond twice the recorded one: the paper route's counterpart of rule 14. One message for the orders that matter. Audit (tri-stable quintic, true
-    2 v^3 beside (0.2 + 1400 x^2) v, x v a at 60 dB, records at |v| <= 0.04): v^3 dropped at every well, the damping
-    at |v| = 0.4 2.6 x too low with a band of +-0.3 %, no warning."""
+    speed is beyond twice the recorded one: the paper route's counterpart of rule 14. One message for the orders
+    that matter. Audit (tri-stable quintic, true 2 v^3 beside (0.2 + 1400 x^2) v, x v a at 60 dB, records at
+    |v| <= 0.04): v^3 dropped at every well, the damping at |v| = 0.4 2.6 x too low with a band of +-0.3 %, no
+    warning."""
     if not found or not speed > 2.0 * recorded_speed or not (np.isfinite(x_lo) and np.isfinite(x_hi)):
         return []
     b, c = np.asarray(velocity_damping, float), np.asarray(position_damping, float)
