@@ -165,3 +165,33 @@ def test_gls_coordination_averages_local_noise():
                                rtol=1e-9, atol=1e-6)
     with pytest.raises(ValueError, match="method"):
         g.coordinate(fits, lib, method="spline")
+
+
+def test_a_removed_term_weighs_as_what_its_data_bound():
+    """Three wells of a quintic, their local Taylor vectors exact to 1e-8; at the middle well STLS removed
+    q^4, which is 5e4 in truth there (its centre a hair off the symmetric root). As an exact zero
+    (`dropped` None) it rejects every degree below the interpolant's 17; weighed by the variance it would
+    have had kept (`LocalFit.dropped`, 10x its value here), the quintic is accepted and exact."""
+    lib = g.Library(5, 1)
+    poly = np.polynomial.Polynomial.fromroots([-0.012, -0.006, 0.001, 0.007, 0.015]) * 1.3e10
+    wells = [-0.01199, 0.001 + 8.3e-7, 0.01499]
+    s_idx = lib.indices("stiffness")
+    coefs = np.zeros((3, lib.n_terms))
+    cov = np.zeros((3, lib.n_terms, lib.n_terms))
+    dropped = np.zeros((3, lib.n_terms))
+    for i, x in enumerate(wells):
+        taylor = np.array([poly.deriv(k)(x) / math.factorial(k) if k else poly(x) for k in range(6)])
+        se = 1e-8 * np.abs(taylor) + 1e-300
+        if i == 1:
+            assert 1e4 < abs(taylor[4]) < 1e5
+            dropped[i, s_idx[4]] = (10 * taylor[4]) ** 2
+            taylor[4], se[4] = 0.0, 0.0
+        coefs[i, s_idx] = taylor
+        cov[i, s_idx, s_idx] = se**2
+    exact = eqx.tree_at(lambda f: f.covariance, _fits(wells, coefs, lib), jnp.asarray(cov))
+    weighed = g.LocalFit(exact.equilibrium, exact.coef, exact.covariance, exact.threshold, exact.rss,
+                         exact.n_samples, dropped=jnp.asarray(dropped))
+    assert int(g.coordinate(exact, lib).stats["K_r"]) > 5
+    sol = g.coordinate(weighed, lib)
+    assert int(sol.stats["K_r"]) == 5
+    np.testing.assert_allclose(np.asarray(sol.value.stiffness)[:6], poly.coef, rtol=1e-5)

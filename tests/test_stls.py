@@ -145,6 +145,38 @@ def test_rss_and_covariance():
     assert np.all(full[~s] == 0) and np.all(full[:, ~s] == 0)
 
 
+def test_dropped_variance_is_the_variance_the_term_has_when_kept():
+    """`dropped_variance`: each term off the support gets the variance it would have in the fit
+    that keeps it beside the support (sigma² of the sparse fit), checked against NumPy's inverse."""
+    from gmr_jax._fit._stls import compress, dropped_variance
+
+    theta, y, _ = _sparse_problem(3)
+    sol = g.stls(jnp.asarray(theta), jnp.asarray(y), _solver(0.3, 0.0))
+    s = np.asarray(sol.stats["support"])
+    c = np.asarray(sol.value)
+    assert 0 < s.sum() < s.size
+    sigma2 = np.sum((y - theta @ c) ** 2) / (N - s.sum())
+    got = np.asarray(dropped_variance(compress(jnp.asarray(theta), jnp.asarray(y)), sol.value, sol.stats["support"]))
+    assert np.all(got[s] == 0)
+    for j in np.flatnonzero(~s):
+        keep = np.append(np.flatnonzero(s), j)
+        want = sigma2 * np.linalg.inv(theta[:, keep].T @ theta[:, keep])[-1, -1]
+        np.testing.assert_allclose(got[j], want, rtol=1e-8)
+
+
+def test_noise_free_covariance_has_a_floor():
+    """An exact target (no residual): the standard errors are those of a residual at `RESIDUAL_FLOOR` of
+    the target's RMS, not 0 (noise-free records, audit D F6)."""
+    from gmr_jax._fit._stls import RESIDUAL_FLOOR
+
+    theta, _, coef = _sparse_problem(3)
+    y = theta @ coef
+    sol = g.stls(jnp.asarray(theta), jnp.asarray(y), _solver(0.0, 0.0))
+    s = np.asarray(sol.stats["support"])
+    want = RESIDUAL_FLOOR**2 * np.mean(y**2) * np.linalg.inv(theta[:, s].T @ theta[:, s])
+    np.testing.assert_allclose(np.asarray(sol.aux)[np.ix_(s, s)], want, rtol=1e-6)
+
+
 # --------------------------------------------------------------------------- jit / vmap / grad
 
 

@@ -10,7 +10,7 @@ from .._solution import RESULTS, Solution, error_if_failed
 from .._trace_cache import disk_traced
 from ._library import STIFFNESS, Library
 from ._errors_in_variables import corrected_qr, shifted_qr
-from ._stls import STLS, compress, coefficient_covariance, residual_sum_of_squares, stls_qr
+from ._stls import STLS, coefficient_covariance, compress, dropped_variance, residual_sum_of_squares, stls_qr
 from ._target_noise import TargetNoise, structured_covariance
 from ._threshold import default_thresholds, select_threshold
 
@@ -47,6 +47,9 @@ class LocalFit(eqx.Module):
     threshold: Float[Array, ""]
     rss: Float[Array, ""]
     n_samples: Float[Array, ""]
+    #: the variance each term STLS removed would have had, kept beside the others (`dropped_variance`;
+    #: zeros on the support; None: unknown, the coordination then takes removed terms as exact zeros)
+    dropped: Float[Array, " terms"] | None = None
 
 
 @disk_traced  # eqx.filter_jit, its traced program kept on disk by the CLI
@@ -111,8 +114,13 @@ def fit_local(
     if fit_qr is not qr:  # the recorded samples' residual (the corrected problem's is smaller)
         sol.stats["rss"] = residual_sum_of_squares(qr, sol.value)
     cov = coefficient_covariance(qr, sol.value, sol.stats["support"])
+    dropped = dropped_variance(qr, sol.value, sol.stats["support"])
     if noise is not None:
+        ols = jnp.diagonal(cov)
         cov, extra["noise_ratio"] = structured_covariance(theta, y, w, sol.value, sol.stats["support"], noise)
+        # the removed terms' variances scaled as the kept ones' are by the noise's structure (their mean ratio)
+        ratio = jnp.where(ols > 0, jnp.diagonal(cov) / jnp.where(ols > 0, ols, 1.0), 0.0)
+        dropped = dropped * jnp.sum(ratio) / jnp.maximum(jnp.sum(ols > 0), 1)
     fit = LocalFit(
         equilibrium=xe,
         coef=sol.value,
@@ -120,6 +128,7 @@ def fit_local(
         threshold=jnp.asarray(solver.threshold, float),
         rss=sol.stats["rss"],
         n_samples=sol.stats["n_samples"],
+        dropped=dropped,
     )
     out = Solution(value=fit, result=sol.result, stats={**sol.stats, **cv, **extra})
     return error_if_failed(out, throw)

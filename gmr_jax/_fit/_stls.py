@@ -160,17 +160,44 @@ def residual_sum_of_squares(qr: QRData, coef) -> Float[Array, ""]:
     return jnp.maximum(qr.yy - jnp.sum(qr.z**2), 0.0) + jnp.sum((qr.r @ coef - qr.z) ** 2)
 
 
+#: The residual variance of a local fit is at least this fraction of the target's mean square, squared
+#: (120 dB): below it the residual of a record is the integrator's or the quantisation's systematic error, not
+#: white noise, and sigma² (Θ'Θ)^-1 would claim a precision no record has (noise-free quintic tri-stable records,
+#: audit D F6: local standard errors of 1e-16 of the coefficients, every global degree rejected, a degree-17
+#: interpolant with twelve spurious terms "20 standard errors" from zero).
+RESIDUAL_FLOOR = 1e-6
+
+
+def _sigma2(qr: QRData, coef, support) -> Float[Array, ""]:
+    """sigma² = RSS / (n - |S|), at least `RESIDUAL_FLOOR`² of the target's mean square."""
+    sigma2 = residual_sum_of_squares(qr, coef) / jnp.maximum(qr.n - jnp.sum(support), 1.0)
+    return jnp.maximum(sigma2, RESIDUAL_FLOOR**2 * qr.yy / jnp.maximum(qr.n, 1.0))
+
+
 def coefficient_covariance(qr: QRData, coef, support) -> Float[Array, "terms terms"]:
     """OLS covariance sigma² (Θ_S^T Θ_S)^-1 on the support (zeros elsewhere).
 
-    sigma² = RSS / (n - |S|). This assumes white residuals; where the target holds a filtered
-    derivative, `fit_local(..., noise=)` uses the noise's structure instead (`_target_noise`)."""
+    sigma² = RSS / (n - |S|) (at least `RESIDUAL_FLOOR`² of the target's mean square). This assumes white
+    residuals; where the target holds a filtered derivative, `fit_local(..., noise=)` uses the noise's
+    structure instead (`_target_noise`)."""
     norms = jnp.where(column_norms(qr) > 0, column_norms(qr), 1.0)
     rn = jnp.where(support[None, :], qr.r / norms[None, :], 0.0)
-    rss = residual_sum_of_squares(qr, coef)
-    k = jnp.sum(support)
-    sigma2 = rss / jnp.maximum(qr.n - k, 1.0)
+    sigma2 = _sigma2(qr, coef, support)
     return sigma2 * support_inverse(rn.T @ rn, support) / (norms[:, None] * norms[None, :])
+
+
+def dropped_variance(qr: QRData, coef, support) -> Float[Array, " terms"]:
+    """The variance each term off the support would have in a fit that kept it beside the support
+    (sigma² / the Schur complement of its column against the support's), zeros on the support: how
+    well the data bound a term STLS removed (the coordination's weight of that known zero)."""
+    norms = jnp.where(column_norms(qr) > 0, column_norms(qr), 1.0)
+    rn = qr.r / norms[None, :]
+    gram = rn.T @ rn
+    on = support[:, None] & support[None, :]
+    ginv = support_inverse(jnp.where(on, gram, 0.0), support)
+    schur = jnp.diagonal(gram) - jnp.einsum("ij,jk,ki->i", gram, ginv, gram)
+    var = _sigma2(qr, coef, support) / jnp.maximum(schur, 1e-300) / norms**2
+    return jnp.where(support, 0.0, var)
 
 
 def support_inverse(gram: Float[Array, "terms terms"], support) -> Float[Array, "terms terms"]:
