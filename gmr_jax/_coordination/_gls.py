@@ -8,7 +8,7 @@ When the local fits carry more constraints than the global law needs, a lower de
 to all of them, each weighted by the inverse of its local covariance, averages that noise out.
 
 Rule: K' is the smallest degree, at least 2n - 1 for n wells (room for the n - 1 saddles between
-them) and below K, whose weighted residual is consistent with the local covariances
+them; the damping polynomial, which has none, from 0) and below K, whose weighted residual is consistent with the local covariances
 (chi-squared with m - K' - 1 degrees of freedom, p > `alpha`); if none is, K' = K and the
 solution is the paper's exact Hermite interpolant. For a restoring force (`confining=True`; `reconstruct`
 uses it where the paper route's degree is even, and for a cell that borrowed orders from cells of its
@@ -100,6 +100,7 @@ def hermite_gls(
     alpha: float = 0.05,
     confining: bool = False,
     max_degree: Int[Array, ""] | int | None = None,
+    min_degree: int | None = None,
 ):
     """Global polynomial from local Taylor coefficients and their covariances (Eqs. 15-18
     as generalised least squares; module docstring for the degree rule).
@@ -114,6 +115,8 @@ def hermite_gls(
       orders 2 and 3): the exact sextic was 6.55 % off and cannot confine, the quintic 1.3 %.
     - `max_degree`: the highest degree allowed (None: no bound; a traced integer does not
       recompile); an exact interpolant of higher degree gives way to the highest allowed one.
+    - `min_degree`: the lowest degree tested (None: 2n - 1, room for the n - 1 saddles of a
+      restoring force; the damping polynomial has no saddles to make room for and takes 0).
 
     **Returns:** `(coeffs, degree, cond, stats)`: monomial coefficients (zero above the degree),
     the chosen degree K', the condition number of the scaled weighted system at K', and
@@ -137,7 +140,7 @@ def hermite_gls(
     # an even K (a term resolved at one well only: Kresling 1 mm seed 3, cell 4, local orders 2 and 3, the
     # exact sextic 6.55 % off) gives way to the highest odd degree below it, fitted to all.
     cap = p <= (size if max_degree is None else max_degree)
-    odd = ((p % 2 == 1) | (not confining)) & (p >= 2 * n - 1)
+    odd = ((p % 2 == 1) | (not confining)) & (p >= (2 * n - 1 if min_degree is None else min_degree))
     ok = (pval > alpha) & odd & (p < k_herm) & cap
     below = odd & (p < k_herm) & cap
     lower = confining & (k_herm % 2 == 0) | ~cap[jnp.clip(k_herm, 0, size - 1)]
