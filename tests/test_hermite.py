@@ -235,3 +235,7 @@ def test_damping_polynomial_degree_starts_at_zero():
     herm, gls = g.coordinate(fits, lib, method="hermite"), g.coordinate(fits, lib)
     assert int(herm.stats["K_d"]) == 5 and int(gls.stats["K_d"]) <= 2
     assert err(gls) < 0.015 and err(gls) < 0.5 * err(herm), (err(gls), err(herm))
+    # the band's embedded error is that of the law chosen (one next-degree vector, not the interpolant's three)
+    from gmr_jax._coordination._discrepancy import discrepancy
+
+    assert len(discrepancy(jax.device_get(fits), lib)["damping"][0]) == 1

@@ -34,7 +34,7 @@ import numpy as np
 from .._fit._local_fit import LocalFit
 from .._trace_cache import disk_traced
 from .._fit._library import Library
-from ._coordinate import _taylor_blocks, _taylor_covariances
+from ._coordinate import DAMPING_MIN_DEGREE, _taylor_blocks, _taylor_covariances, with_dropped
 from ._gls import hermite_gls, weighted_fit, weighted_system
 from ._hermite import hermite_interpolate, highest_order, monomial_map
 
@@ -59,14 +59,15 @@ NEXT_DEGREES = 1
 
 
 def _chosen_and_vectors(nodes, taylor, order, cov, method: str, alpha: float, confining: bool = False,
-                        max_degree=None):
+                        max_degree=None, min_degree=None):
     """The coordination's polynomial (as `coordinate` picks it), its embedded-error vectors
     (m, size) and the Birge ratio of its weighted fit (1 without redundancy)."""
     exact, k_herm, _ = _interpolate(nodes, taylor, order)
     k_herm = int(k_herm)
     size = taylor.shape[0] * taylor.shape[1]
     if method == "gls":
-        coef, degree, _, stats = _gls(nodes, taylor, order, cov, alpha, confining=confining, max_degree=max_degree)
+        coef, degree, _, stats = _gls(nodes, taylor, order, cov, alpha, confining=confining, max_degree=max_degree,
+                                      min_degree=min_degree)
         degree = int(degree)
     else:
         coef, degree, stats = exact, k_herm, {}
@@ -96,10 +97,11 @@ def discrepancy(fits: LocalFit, library: Library, *, method: str = "gls", alpha:
     coefficients of a polynomial (the restoring force F, the damping polynomial C of
     `coordinate`: C_0 is the viscous B_1, C_j the x^j v coefficients)."""
     a, c, _ = _taylor_blocks(fits.coef, library)
-    cov_a, cov_c = _taylor_covariances(fits.covariance, library)
+    cov_a, cov_c = _taylor_covariances(np.asarray(with_dropped(fits)), library)  # as `coordinate` weighs them
     x = fits.equilibrium
     out = {"restoring": _chosen_and_vectors(x, a, highest_order(a != 0), cov_a, method, alpha, confining, max_degree)}
-    out["damping"] = (_chosen_and_vectors(x, c, highest_order(c != 0), cov_c, method, alpha)
+    out["damping"] = (_chosen_and_vectors(x, c, highest_order(c != 0), cov_c, method, alpha,
+                                          min_degree=DAMPING_MIN_DEGREE)
                       if c.shape[1] > 0 else ([], 1.0))
     return out
 

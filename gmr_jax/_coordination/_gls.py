@@ -8,8 +8,8 @@ When the local fits carry more constraints than the global law needs, a lower de
 to all of them, each weighted by the inverse of its local covariance, averages that noise out.
 
 Rule: K' is the smallest degree, at least 2n - 1 for n wells (room for the n - 1 saddles between
-them; the damping polynomial, which has none, from 0) and below K, whose weighted residual is consistent with the local covariances
-(chi-squared with m - K' - 1 degrees of freedom, p > `alpha`); if none is, K' = K and the
+them; the damping polynomial, which has none, from 0) and below K, whose weighted residual is
+consistent with the local covariances (chi-squared with m - K' - 1 degrees of freedom, p > `alpha`); if none is, K' = K and the
 solution is the paper's exact Hermite interpolant. For a restoring force (`confining=True`; `reconstruct`
 uses it where the paper route's degree is even, and for a cell that borrowed orders from cells of its
 design) only odd degrees count (only they can confine, with a positive leading coefficient: F -> +-inf on
