@@ -62,6 +62,7 @@ from ._local_rules import (
     _extend_restoring,
     _fit_wells,
     _one_of_a_group,
+    _refit_screened_damping,
     _screen,
     _share_velocity_damping,
     _under_top_order,
@@ -1054,6 +1055,9 @@ def reconstruct(
             if _local_rules.ONE_OF_A_GROUP:
                 screened = _one_of_a_group(fits, screened, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
                                            noise, x_noise, band)
+            if _local_rules.REFIT_SCREENED_DAMPING:
+                screened = _refit_screened_damping(fits, screened, xs, vs, ys, w, library, solver, screen_sigma, i,
+                                                   failure, noise, x_noise, band)
             fits = screened
         codes = np.asarray(sols.result._value)
         for k in np.nonzero(codes != RESULTS.successful._value)[0]:
