@@ -1052,12 +1052,12 @@ def reconstruct(
         eiv = _eiv_report(x_noise, xs, w, sols.stats.get("eiv_applied"))
         if screen_sigma is not None:
             screened = _screen(fits, screen_sigma, library)
-            if _local_rules.ONE_OF_A_GROUP:
-                screened = _one_of_a_group(fits, screened, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
-                                           noise, x_noise, band)
-            if _local_rules.REFIT_SCREENED_DAMPING:
+            if _local_rules.REFIT_SCREENED_DAMPING:  # wells that keep some damping terms (before the next rule)
                 screened = _refit_screened_damping(fits, screened, xs, vs, ys, w, library, solver, screen_sigma, i,
                                                    failure, noise, x_noise, band)
+            if _local_rules.ONE_OF_A_GROUP:  # wells whose damping terms the screen zeroed all at once
+                screened = _one_of_a_group(fits, screened, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
+                                           noise, x_noise, band)
             fits = screened
         codes = np.asarray(sols.result._value)
         for k in np.nonzero(codes != RESULTS.successful._value)[0]:
