@@ -136,6 +136,8 @@ def test_damping_terms_found_at_one_well_only_are_dropped(monkeypatch):
     from gmr_jax._reconstruct import _local_rules
 
     monkeypatch.setattr(_local_rules, "EXTEND_POSITION_DAMPING", False)
+    # the refit of a well whose screen zeroed some damping terms (stop 52) also removes it (0.44 %): off too
+    monkeypatch.setattr(_local_rules, "REFIT_SCREENED_DAMPING", False)
     system = g.systems.kresling5(damping_ratio=0.2)
     recs = g.systems.make_recordings(system, 7.5e-4, snr_db=60.0, seed=4)
     box = system.x_range[0], system.v_range[0]
@@ -144,6 +146,7 @@ def test_damping_terms_found_at_one_well_only_are_dropped(monkeypatch):
     assert damping_error(raw.value, system.truth, 0, *box) > 0.05
     with monkeypatch.context() as m:
         m.setattr(_local_rules, "EXTEND_POSITION_DAMPING", True)
+        m.setattr(_local_rules, "REFIT_SCREENED_DAMPING", True)
         default = g.reconstruct(recs, g.Library(5, 5), shared_damping=False)
     assert damping_error(default.value, system.truth, 0, *box) < 0.01
     res = g.reconstruct(recs, g.Library(5, 5), extend_restoring=False, shared_design=False)
