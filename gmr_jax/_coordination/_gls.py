@@ -9,17 +9,18 @@ to all of them, each weighted by the inverse of its local covariance, averages t
 
 Rule: K' is the smallest degree, at least 2n - 1 for n wells (room for the n - 1 saddles between
 them; the damping polynomial, which has none, from 0) and below K, whose weighted residual is
-consistent with the local covariances (chi-squared with m - K' - 1 degrees of freedom, p > `alpha`); if none is, K' = K and the
-solution is the paper's exact Hermite interpolant. For a restoring force (`confining=True`; `reconstruct`
-uses it where the paper route's degree is even, and for a cell that borrowed orders from cells of its
-design) only odd degrees count (only they can confine, with a positive leading coefficient: F -> +-inf on
-both sides); `reconstruct` checks the sign where it matters: a cell that borrowed orders and whose law
-turns outward within the reach of its motions takes a lower degree (`max_degree`). The smallest
-accepted degree, at most `max_degree`; where none is accepted, the exact interpolant (K), or, for
-a confining law of even K or K above `max_degree`, the highest odd degree below it, fitted to all
-the conditions. Known zeros (terms STLS removed) carry a
-variance floor far below the kept terms', so they act as (nearly) hard constraints, as in the
-Hermite solve.
+consistent with the local covariances (chi-squared with m - K' - 1 degrees of freedom, p > `alpha`);
+if none is, K' = K and the solution is the paper's exact Hermite interpolant. For a restoring force
+(`confining=True`; `reconstruct` uses it where the paper route's degree is even, and for a cell that
+borrowed orders from cells of its design) only odd degrees count (only they can confine, with a
+positive leading coefficient: F -> +-inf on both sides); `reconstruct` checks the sign where it
+matters: a cell that borrowed orders and whose law turns outward within the reach of its motions
+takes a lower degree (`max_degree`). The smallest accepted degree, at most `max_degree`; where none
+is accepted, the exact interpolant (K), or, for a confining law of even K or K above `max_degree`,
+the highest odd degree below it, fitted to all the conditions. Known zeros given no variance (a zero
+covariance diagonal) carry a variance floor far below the kept terms', so they act as (nearly) hard
+constraints, as in the Hermite solve; `coordinate` gives each term STLS removed the variance it
+would have had kept (`with_dropped`), so only the terms the t-screen zeroed still act so.
 """
 
 import jax

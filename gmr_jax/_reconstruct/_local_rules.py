@@ -254,26 +254,27 @@ def _refit_screened_damping(fits, screened, xs, vs, ys, w, library, solver, n_si
     damping = np.array([phys != STIFFNESS for phys, _ in library.terms()])
     before = np.asarray(fits.coef)
     for k in range(before.shape[0]):
+        after = np.asarray(screened.coef)[k]
+        kept = damping & (after != 0)
+        if not np.any(damping & (before[k] != 0) & (after == 0)) or not np.any(kept):
+            continue
         for _ in range(rounds):
-            after = np.asarray(screened.coef)[k]
-            gone = damping & (before[k] != 0) & (after == 0)
-            if not np.any(gone) or not np.any(damping & (after != 0)):
-                break
-            j = int(np.flatnonzero(damping & (after != 0))[0])
+            # the refit's support: `after`'s terms (j is one of them, as `_refit_with` takes it) and the restoring
+            # terms as fitted
+            j = int(np.flatnonzero(kept)[0])
             sol, ok, _, _ = _refit_with(xs, vs, ys, w, library, solver, fits, k, after, j, noise, x_noise, band,
                                         fitted=fits)
             if not ok:
                 failure.note(sol.result, f"DOF {dof}, well {k}: refit on its screened damping terms")
                 break
             new = _screen(_as_well(sol.value), n_sigma, library)
-            kept_before = damping & (after != 0)
-            if not np.any(damping & (np.asarray(new.coef)[0] != 0)):
+            now = damping & (np.asarray(new.coef)[0] != 0)
+            if not np.any(now):
                 break  # the refit resolves none of them: the screened well as it was
             screened = _set_well(screened, k, new)
-            if np.array_equal(damping & (np.asarray(new.coef)[0] != 0), kept_before):
-                break
-            before = before.copy()
-            before[k] = np.where(damping, np.asarray(sol.value.coef), before[k])
+            if np.array_equal(now, kept):
+                break  # no damping term fell: done
+            after, kept = np.asarray(new.coef)[0], now
     return screened
 
 
