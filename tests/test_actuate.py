@@ -198,3 +198,11 @@ def test_cli_actuate_tries_the_design_on_models_drawn_from_the_covariance(tmp_pa
     assert "models drawn from the file's covariance" in rob["sentence"]
     plain = json.loads((tmp_path / "plain" / "actuation.json").read_text())["robustness"]
     assert plain["draws"] == 0 and "no covariance" in plain["sentence"]
+    # --require-robust: exit status 3 where the design is reached but not robust, or its robustness cannot be said
+    robust = json.loads((tmp_path / "cov" / "actuation.json").read_text())["robust"]
+    assert robust is (rob["share_at_design"] >= 0.95)
+    rc = main(["actuate", str(tmp_path / "cov.json"), "--out", str(tmp_path / "cov_r"), *args, "--require-robust"])
+    assert rc == (0 if robust else 3)
+    assert main(["actuate", str(tmp_path / "plain.json"), "--out", str(tmp_path / "plain_r"), *args,
+                 "--require-robust"]) == 3
+    assert (tmp_path / "plain_r" / "actuation.json").exists()  # written either way

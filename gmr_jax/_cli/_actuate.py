@@ -33,6 +33,10 @@ def register(sub):
                    help="models drawn from the file's covariance on which the designed half-sine, and larger "
                    "amplitudes, are tried: the share of them it deploys, and the amplitude that deploys 95 %% "
                    "(default 32; 0: off)")
+    a.add_argument("--require-robust", action="store_true",
+                   help="exit with status 3 where the design is reached on the model but not robust: it deploys "
+                   "fewer than 95 %% of the --draws models, or that could not be said (no draws, no covariance); "
+                   "the file is written either way")
     a.add_argument("--sign-eps", type=positive_float, default=1e-3,
                    help="sgn(v) -> tanh(v/eps) inside differentiated solves (models with sgn(v) terms)")
     a.set_defaults(fn=run)
@@ -113,7 +117,20 @@ def run(args):
             print(f"gmr actuate: {robust['sentence']}", file=sys.stderr)
     print(f"wrote {out}/actuation.json")
     stage("done")
-    return 0 if reached else 1
+    if not reached:
+        return 1
+    if args.require_robust and doc.get("robust") is not True:
+        if doc.get("robust") is False:
+            why = "it is not robust (see the warning above)"
+        elif robust is not None:
+            why = f"its robustness could not be said ({robust['sentence']})"
+        else:
+            why = ("its robustness was not tried (" + ("--draws 0" if args.draws == 0 else
+                   "a sampled force history is verified on the model only") + ")")
+        print(f"gmr actuate: --require-robust: the design reaches the target on the model, but {why}; exit status 3",
+              file=sys.stderr)
+        return 3
+    return 0
 
 
 
