@@ -13,7 +13,11 @@ import importlib.metadata as _metadata
 from . import _config as _config  # noqa: F401  (enables x64 first)
 
 # results and errors
-from ._config import use_compilation_cache as use_compilation_cache, use_cpu_cores as use_cpu_cores
+from ._config import (
+    relieve_map_pressure as relieve_map_pressure,
+    use_compilation_cache as use_compilation_cache,
+    use_cpu_cores as use_cpu_cores,
+)
 from ._errors import GMRInputError as GMRInputError
 from ._reconstruct._sanity import GMRDataWarning as GMRDataWarning
 from ._solution import GMRComputationError as GMRComputationError, RESULTS as RESULTS, Solution as Solution

@@ -113,3 +113,42 @@ def use_compilation_cache(path: str | None = None, *, min_compile_time: float = 
 
     set_folder(path)  # and the traced programs of the fits (gmr_jax._trace_cache)
     return path
+
+
+#: `relieve_map_pressure`: the share of the kernel's limit on one process's memory maps
+#: (`vm.max_map_count`, 65530 by default) above which JAX's compiled programs are dropped
+MAP_SHARE = 0.5
+
+
+def map_pressure() -> float | None:
+    """This process's memory maps as a share of the kernel's limit on them (Linux; None where
+    either cannot be read). Each program XLA:CPU compiles, or loads from the compilation cache,
+    holds about six maps for as long as JAX keeps it in memory, and JAX keeps every one: a
+    process that compiles some 10 000 (a long notebook session of fits on records of many
+    lengths; the test suite's slow tier) reaches the limit, and the next program it loads
+    crashes the process with a segmentation fault inside XLA, not a Python error."""
+    try:
+        with open("/proc/sys/vm/max_map_count") as f:
+            limit = int(f.read())
+        with open("/proc/self/maps", "rb") as f:
+            n = sum(1 for _ in f)
+    except (OSError, ValueError):
+        return None
+    return n / limit if limit > 0 else None
+
+
+def relieve_map_pressure(share: float = MAP_SHARE) -> bool:
+    """Where this process holds more than `share` of the memory maps the kernel allows
+    (`map_pressure`), drop JAX's in-memory compiled programs (`jax.clear_caches()`) so that their
+    maps are returned; programs used again are recompiled, or loaded from the persistent
+    compilation cache. Results do not change, only the time of the next calls. `reconstruct`,
+    `gmc_sindy`, `basin_map`, `basin_probability`, `refine`, `actuate` and `discover` call it on
+    entry; call it between steps of a long loop of your own. Returns whether it dropped them."""
+    p = map_pressure()
+    if p is None or p < share:
+        return False
+    import gc
+
+    jax.clear_caches()
+    gc.collect()
+    return True

@@ -65,7 +65,7 @@ import jax  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-import gmr_jax  # noqa: F401  (enables jax_enable_x64)
+import gmr_jax  # noqa: E402  (enables jax_enable_x64)
 
 jax.config.update("jax_numpy_rank_promotion", "raise")
 
@@ -85,3 +85,12 @@ def pytest_collection_modifyitems(config, items):
 def rng():
     """A seeded NumPy generator: tests that draw data are reproducible."""
     return np.random.default_rng(0)
+
+
+@pytest.fixture(autouse=True)
+def _relieve_map_pressure():
+    """After each test, a worker holding over half the memory maps the kernel allows drops JAX's
+    compiled programs (`gmr_jax._config.relieve_map_pressure`): a worker of the slow tier reached
+    the limit after some 10 000 programs and crashed inside XLA (stop 52's CI, and locally)."""
+    yield
+    gmr_jax._config.relieve_map_pressure()

@@ -37,6 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._config import relieve_map_pressure
 from .._errors import GMRInputError
 from .._solution import RESULTS, Solution, raise_if_failed
 from .._basins._sweep import SweepSettings, _final_state, basin_map, classify
@@ -483,6 +484,7 @@ def actuate(
     Raises `GMRInputError` for a malformed target, a cell that is not bistable, or a target equal
     to the start.
     """
+    relieve_map_pressure()  # a long session's compiled programs (`_config.map_pressure`)
     if kind not in KINDS:
         raise GMRInputError(f"kind must be one of {KINDS}, got {kind!r}")
     if settings.objective not in OBJECTIVES:

@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int, PRNGKeyArray
 
+from .._config import relieve_map_pressure
 from .._coordination._joint import damping_faults, fall_speed
 from .._errors import GMRInputError
 from .._model._model import GlobalModel
@@ -102,6 +103,7 @@ def basin_probability(
     A point where a sample failed or did not settle counts for configuration -1 (each sweep
     runs with `throw=False`; `stats["counts"]` sums the sweeps' codes).
     """
+    relieve_map_pressure()  # a long session's compiled programs (`_config.map_pressure`)
     n = int(n)
     if n < 1:
         raise GMRInputError(f"basin_probability: n must be >= 1, got {n}")

@@ -16,6 +16,7 @@ from jax.sharding import Mesh
 from jax.sharding import PartitionSpec as P
 from jaxtyping import Array, ArrayLike, Float, Int
 
+from .._config import relieve_map_pressure
 from .._errors import GMRInputError, check_real, describe
 from .._model._model import AbstractMechanicalModel
 from .._simulate._inputs import half_sine
@@ -380,6 +381,7 @@ def basin_map(
     Compiled shapes depend only on the number of points, `chunk`, the devices and the model's
     structure: new f, A, settle times, tolerances or coefficient values do not recompile.
     """
+    relieve_map_pressure()  # a long session's compiled programs (`_config.map_pressure`)
     f_np, a_np, wells_np, x0_np = _check_inputs(model, f, A, wells, x0)
     model, sign_eps = friction_smoothing(model, settings, wells_np)
     n_threads = None if devices is None else len(devices)  # native: one thread per device given, else every core

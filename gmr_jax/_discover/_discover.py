@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import jax.numpy as jnp
 import numpy as np
 
+from .._config import relieve_map_pressure
 from .._errors import GMRInputError
 from .._solution import RESULTS, Solution, code_name, message, raise_if_failed
 from .._model._model import GlobalModel, from_terms
@@ -343,6 +344,7 @@ def discover(
     before/after, the augmented model), `result` `successful` or `nonfinite`, and `stats` with
     the number of findings and the error measure used.
     """
+    relieve_map_pressure()  # a long session's compiled programs (`_config.map_pressure`)
     if not recordings:
         raise GMRInputError("discover: no recordings given")
     d = model.n_dof

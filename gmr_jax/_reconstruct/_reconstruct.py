@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._config import relieve_map_pressure
 from .._coordination._coordinate import GlobalCoefficients, coordinate, split_flat
 from .._coordination._discrepancy import add_discrepancy, calibrate_covariance, discrepancy
 from .._coordination._joint import CONFLICT as JOINT_CONFLICT
@@ -991,6 +992,7 @@ def reconstruct(
     with different masses, inconsistent shapes) raise `GMRInputError` before anything is
     computed.
     """
+    relieve_map_pressure()  # a long session's compiled programs (`_config.map_pressure`)
     failure = _Failure("reconstruct", throw)
     say = progress or (lambda msg: None)
     measured = all(r.a is not None and "a" not in r.derived for r in recordings)
@@ -1263,6 +1265,7 @@ def gmc_sindy(
     support was still changing at `max_iter` is kept (as pysindy does) with a warning in
     `stats["warnings"]`, beside the data checks of `reconstruct` that apply to one global fit
     (masses, clipping, missing input, training R²); a non-finite fit is a failure (`throw`)."""
+    relieve_map_pressure()  # a long session's compiled programs (`_config.map_pressure`)
     failure = _Failure("gmc_sindy", throw)
     recs, masses, topology, warnings = _resolve(recordings, masses, topology, min_recordings=1)
     d = recs[0].n_dof

@@ -12,6 +12,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
+from .._config import relieve_map_pressure
 from .._errors import GMRDataWarning, GMRInputError
 from .._solution import RESULTS, Solution, code_name, raise_if_failed
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING
@@ -309,6 +310,7 @@ def refine(
     `warnings` (also emitted as `GMRDataWarning`: a refined model worse on the holdout; a restoring
     law moved beyond the given model's band).
     """
+    relieve_map_pressure()  # a long session's compiled programs (`_config.map_pressure`)
     problem, p0, windows = shooting_problem(model, recordings, free, settings)
     r0, ok0 = _residuals(problem, p0, windows)
     cost0 = float(jnp.sum(r0**2))
