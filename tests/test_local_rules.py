@@ -200,3 +200,31 @@ def test_a_screen_that_zeroes_some_damping_terms_refits_the_rest():
     se = float(np.sqrt(np.asarray(out.covariance)[0, j3, j3]))
     truth = 10.0
     assert abs(coef[j3] - truth) < 3 * se < abs(before[j3] - truth), (coef[j3], before[j3], se)
+
+
+def test_a_term_the_screen_zeroes_keeps_its_variance_for_the_coordination():
+    """`_screen` zeroes a term under 3 standard errors; the coordination weighs that zero as the variance the
+    term had when fitted (`LocalFit.dropped`: its standard error squared), as it weighs a term STLS removed,
+    not as an exact zero. Kept terms keep no dropped variance, and the covariance loses the zeroed rows."""
+    import jax.numpy as jnp
+
+    from gmr_jax._coordination._coordinate import with_dropped
+    from gmr_jax._reconstruct import _local_rules as L
+
+    system = g.systems.bistable_joint("position_independent")
+    rec = g.systems.make_recordings(system, np.deg2rad(1.0), snr_db=40.0, seed=0, duration=4.0)[0]
+    library = g.Library(3, 5)
+    m = float(rec.masses[0])
+    x, v, y = (jnp.asarray(c) for c in (rec.x[:, 0], rec.v[:, 0], -m * rec.a[:, 0]))
+    fits = L._as_well(g.fit_local(x, v, y, library, g.STLS(threshold=0.0), None).value)
+    cov = np.asarray(fits.covariance)[0]
+    se2 = np.diagonal(cov)
+    screened = L._screen(fits, 3.0, library)
+    coef, dropped = np.asarray(screened.coef)[0], np.asarray(screened.dropped)[0]
+    zeroed = (coef == 0) & (np.asarray(fits.coef)[0] != 0)
+    assert zeroed.any() and (~zeroed).any()
+    np.testing.assert_allclose(dropped[zeroed], se2[zeroed], rtol=1e-12)
+    assert np.all(dropped[~zeroed] == 0)
+    assert np.all(np.asarray(screened.covariance)[0][zeroed] == 0)
+    weighed = np.diagonal(np.asarray(with_dropped(screened))[0])  # what the coordination weighs with
+    np.testing.assert_allclose(weighed[zeroed], se2[zeroed], rtol=1e-12)

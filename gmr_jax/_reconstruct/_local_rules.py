@@ -32,7 +32,9 @@ def _screen(fits: LocalFit, n_sigma: float, library: Library | None = None, exem
     highest order as a known zero (Eq. 18), and an unresolved q^3 under a resolved q^4 is not known
     to be zero (shallow arch, 30 dB, seed 2: the third derivative set to 0 at the second well,
     restoring error 1.33 -> 3.54 % where the correction for the noise on x moved q^3 below 3
-    standard errors). A coefficient STLS set to zero stays a known zero, as in the paper. `exempt`: a mask
+    standard errors). A coefficient STLS set to zero stays zero, as in the paper, and one the screen
+    zeroes joins it: both weigh in the coordination as the variance they would have had kept
+    (`LocalFit.dropped`; here the standard error squared), not as exact zeros. `exempt`: a mask
     (terms,) or (wells, terms) of terms kept whatever their t."""
     coef, cov = np.asarray(fits.coef), np.asarray(fits.covariance)
     se = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None))
@@ -45,8 +47,16 @@ def _screen(fits: LocalFit, n_sigma: float, library: Library | None = None, exem
         top = np.max(np.where(kept, np.arange(idx.size), -1), axis=1)  # highest kept order per well
         below = np.arange(idx.size)[None, :] <= top[:, None]
         keep[:, idx] = kept | (below & (coef[:, idx] != 0))
+    zeroed = ~keep & (coef != 0)
     cov = np.where(keep[:, :, None] & keep[:, None, :], cov, 0.0)
-    return eqx.tree_at(lambda f: (f.coef, f.covariance), fits, (np.where(keep, coef, 0.0), cov))
+    if fits.dropped is None:
+        return eqx.tree_at(lambda f: (f.coef, f.covariance), fits, (np.where(keep, coef, 0.0), cov))
+    # a term the screen zeroed weighs in the coordination as the variance it had when fitted (its
+    # standard error squared: the variance it would have kept), as a term STLS removed does
+    # (`LocalFit.dropped`), not as an exact zero
+    dropped = np.where(zeroed, se**2, np.asarray(fits.dropped))
+    return eqx.tree_at(lambda f: (f.coef, f.covariance, f.dropped), fits,
+                       (np.where(keep, coef, 0.0), cov, dropped))
 
 
 def _under_top_order(coef: np.ndarray, library: Library) -> np.ndarray:
