@@ -234,6 +234,14 @@ def test_13_columns_in_other_units_are_reported(nes):
     msgs = _sanity.check_units("nes_S1", flipped, topo)
     assert abs(np.corrcoef(-r.a[:, 0] - r.base_acc, r.a[:, 0] - r.base_acc)[0, 1]) < 0.9  # plain check: no verdict
     assert len(msgs) == 1 and "acceleration of DOF 0 has the opposite sign" in msgs[0], msgs
+    # rule 13c: a file holding the relative acceleration x'' (a simulation's state) where a = x'' + b is meant;
+    # the correct file is silent (above), this one is named with the fix, and reconstruct emits it
+    relative = [dataclasses.replace(q, a=q.a - q.base_acc[:, None]) for q in recs]
+    msgs = _sanity.check_units("nes_S1", relative[0], topo)
+    assert len(msgs) == 1 and "acceleration of DOF 0 is the relative one, not the absolute one" in msgs[0], msgs
+    assert "add the base acceleration to the a column" in msgs[0]
+    _, msgs = _fit(relative)
+    assert _has(msgs, "nes_S1: the measured acceleration of DOF 0 is the relative one")
 
 
 def test_5_different_masses_are_refused(nes):

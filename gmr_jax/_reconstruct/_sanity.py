@@ -243,6 +243,15 @@ def check_missing_input(name: str, x, has_input: bool) -> list[str]:
 #: `UNITS_MIN_CORR` (below it the noise hides the scale: no verdict).
 UNITS_FACTOR, UNITS_MIN_CORR = 1.25, 0.9
 
+#: Rule 13c: a measured a that is the relative acceleration x'' (a simulation's state, a sensor on the base
+#: subtracted), not the absolute one the equation of motion takes (a = x'' + base_acc): reported where the share
+#: of the smoothed a - base_acc that x'' does not explain (1 - r^2) is this many times the share of a itself.
+#: Built-in base-driven systems (both joints, NES, arch, magnet, Kresling-3; noise-free, 60 and 30 dB, seeds 0-1;
+#: absolute a): at most 1.0 (equal where the base acceleration is 0); a Duffing double well with relative a in the
+#: file (base 0.03-0.05 m/s^2 tones, 10 % vibrations): 32 (0.0255 against 0.0008), fitted with a negative viscous
+#: term, a v|v| term and a degree-7 law, and no other warning on the columns.
+RELATIVE_A_RATIO = 10.0
+
 
 def _scale_hint(s: float) -> str:
     k = np.log10(abs(s)) / 3.0
@@ -285,8 +294,12 @@ def check_units(name: str, rec, topology) -> list[str]:
     if rec.a is not None and "a" not in rec.derived and info.get("from") != "a" and rec.driven:
         b = np.zeros(x.shape[0]) if rec.base_acc is None else np.asarray(rec.base_acc, float)
         rel = np.asarray(rec.a, float) - b[:, None]
+        as_given = np.asarray(rec.a, float)  # rule 13c's other reading: a itself is x''
         if topology.name == "chain":
             rel = np.diff(rel, axis=1, prepend=0.0)  # cell i: a_i - a_(i-1), the cell's x_i''
+            as_given = np.diff(as_given, axis=1, prepend=0.0)  # differs from `rel` in cell 0 only
+        if not np.any(b != 0):
+            as_given = None  # no base acceleration: the two readings are one
         pairs.append(("a", 2, rel))
     out, scales = [], {}
     for key, order, meas in pairs:
@@ -298,6 +311,10 @@ def check_units(name: str, rec, topology) -> list[str]:
             if bracket is None:
                 continue
             r, lo, hi = bracket
+            if key == "a" and as_given is not None and (msg := _relative_acceleration(name, i, d, as_given[:, i], r,
+                                                                                     dt, w)):
+                out.append(msg)
+                continue
             if abs(r) < UNITS_MIN_CORR:
                 if (key == "a" and rec.base_acc is not None and (topology.name != "chain" or x.shape[1] == 1)
                         and _reversed_accelerometer(d, meas[:, i] + 2 * b, dt, w)):
@@ -402,6 +419,29 @@ def _same_scale(r, lo, hi) -> bool:
     """Rule 13's verdict of agreement: a positive correlation and a bracket that reaches the band
     1 / `UNITS_FACTOR` .. `UNITS_FACTOR`."""
     return r > 0 and abs(lo) <= UNITS_FACTOR and abs(hi) >= 1 / UNITS_FACTOR
+
+
+def _relative_acceleration(name: str, i: int, d, a, r: float, dt, w) -> str | None:
+    """Rule 13c: the measured `a` (DOF i's column as given, no base acceleration subtracted; None: no base
+    acceleration) read as x'' explains the second derivative of x `d` better than a - base_acc (correlation `r`)
+    by `RELATIVE_A_RATIO` in the unexplained share 1 - r^2, at a correlation of at least `UNITS_MIN_CORR`: the
+    file holds the relative acceleration. None otherwise."""
+    if a is None:
+        return None
+    from .._recordings._derivatives import differentiate
+
+    bracket = _scale_bracket(d, differentiate(a, dt, 0, w))
+    if bracket is None or not (bracket[0] >= UNITS_MIN_CORR and _same_scale(*bracket)):
+        return None
+    alone, minus = 1.0 - bracket[0] ** 2, 1.0 - r**2
+    if not minus > RELATIVE_A_RATIO * alone:
+        return None
+    return (f"{name}: the measured acceleration of DOF {i} is the relative one, not the absolute one: the column "
+            f"itself is the second derivative of its x (share unexplained {alone:.2g}), the column minus the base "
+            f"acceleration is not ({minus:.2g}); the fit takes a as the absolute acceleration of the mass, a = x'' + "
+            f"base_acc (what an accelerometer on it gives), and would put the base's push into the restoring and "
+            f"damping forces: add the base acceleration to the a column, or remove the column (x is then "
+            f"differentiated)")
 
 
 def _reversed_accelerometer(d, flipped_rel, dt, w) -> bool:
