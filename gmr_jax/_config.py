@@ -144,11 +144,20 @@ def relieve_map_pressure(share: float = MAP_SHARE) -> bool:
     compilation cache. Results do not change, only the time of the next calls. `reconstruct`,
     `gmc_sindy`, `basin_map`, `basin_probability`, `refine`, `actuate` and `discover` call it on
     entry; call it between steps of a long loop of your own. Returns whether it dropped them."""
-    p = map_pressure()
-    if p is None or p < share:
+    p, last = map_pressure(), _AFTER_CLEAR[0]
+    if p is None or p < share or (last is not None and p < last + REGROWTH * share):
         return False
     import gc
 
     jax.clear_caches()
     gc.collect()
+    # maps JAX does not own (native libraries, mapped files) stay: the next drop waits until the maps have grown
+    # by `REGROWTH` x `share` of the limit again, so a process that stays above `share` does not drop on every call
+    _AFTER_CLEAR[0] = map_pressure()
     return True
+
+
+#: `relieve_map_pressure` drops again only once the maps have grown by this fraction of `share` (of the limit)
+#: since the last drop
+REGROWTH = 0.25
+_AFTER_CLEAR: list[float | None] = [None]

@@ -19,8 +19,9 @@ takes a lower degree (`max_degree`). The smallest accepted degree, at most `max_
 is accepted, the exact interpolant (K), or, for a confining law of even K or K above `max_degree`,
 the highest odd degree below it, fitted to all the conditions. Known zeros given no variance (a zero
 covariance diagonal) carry a variance floor far below the kept terms', so they act as (nearly) hard
-constraints, as in the Hermite solve; `coordinate` gives each term STLS removed the variance it
-would have had kept (`with_dropped`), so only the terms the t-screen zeroed still act so.
+constraints, as in the Hermite solve; `coordinate` gives each term STLS removed, and each the
+t-screen zeroed, the variance it would have had kept (`with_dropped`, `LocalFit.dropped`), so
+only zeros that come with no such variance (fits made without it) still act so.
 """
 
 import jax
