@@ -5,6 +5,8 @@ system) and the local fits on small-amplitude data lose most of their digits in 
 Importing `gmr_jax` therefore enables JAX's x64 mode (`jax_enable_x64`) for the process.
 """
 
+import functools
+
 import jax
 
 jax.config.update("jax_enable_x64", True)
@@ -128,13 +130,19 @@ def map_pressure() -> float | None:
     lengths; the test suite's slow tier) reaches the limit, and the next program it loads
     crashes the process with a segmentation fault inside XLA, not a Python error."""
     try:
-        with open("/proc/sys/vm/max_map_count") as f:
-            limit = int(f.read())
+        limit = _map_limit()
         with open("/proc/self/maps", "rb") as f:
             n = sum(1 for _ in f)
     except (OSError, ValueError):
         return None
     return n / limit if limit > 0 else None
+
+
+@functools.cache
+def _map_limit() -> int:
+    """`vm.max_map_count`, read once (a failed read raises and is not kept)."""
+    with open("/proc/sys/vm/max_map_count") as f:
+        return int(f.read())
 
 
 def relieve_map_pressure(share: float = MAP_SHARE) -> bool:

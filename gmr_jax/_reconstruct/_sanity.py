@@ -298,7 +298,7 @@ def check_units(name: str, rec, topology) -> list[str]:
         as_given = np.asarray(rec.a, float)  # rule 13c's other reading: a itself is x''
         if topology.name == "chain":
             rel = np.diff(rel, axis=1, prepend=0.0)  # cell i: a_i - a_(i-1), the cell's x_i''
-            as_given = np.diff(as_given, axis=1, prepend=0.0)  # differs from `rel` in cell 0 only
+            as_given = np.diff(as_given, axis=1, prepend=0.0)  # differs from `rel` in cell 0 only (checked there)
         if not np.any(b != 0):
             as_given = None  # no base acceleration: the two readings are one
         pairs.append(("a", 2, rel))
@@ -312,8 +312,9 @@ def check_units(name: str, rec, topology) -> list[str]:
             if bracket is None:
                 continue
             r, lo, hi = bracket
-            if key == "a" and as_given is not None and (msg := _relative_acceleration(
-                    name, i, d, as_given[:, i], bracket, dt, w, topology.name == "chain")):
+            if (key == "a" and as_given is not None and not np.array_equal(as_given[:, i], meas[:, i])
+                    and (msg := _relative_acceleration(name, i, d, as_given[:, i], bracket, dt, w,
+                                                       topology.name == "chain"))):
                 out.append(msg)
                 continue
             if abs(r) < UNITS_MIN_CORR:
@@ -422,6 +423,12 @@ def _same_scale(r, lo, hi) -> bool:
     return r > 0 and abs(lo) <= UNITS_FACTOR and abs(hi) >= 1 / UNITS_FACTOR
 
 
+def _matches(bracket) -> bool:
+    """A reading whose `_scale_bracket` against x's derivative correlates at least `UNITS_MIN_CORR` and has
+    the same scale (`_same_scale`): it is that derivative (rules 13c and the reversed accelerometer)."""
+    return bracket is not None and bracket[0] >= UNITS_MIN_CORR and _same_scale(*bracket)
+
+
 def _relative_acceleration(name: str, i: int, d, a, minus, dt, w, chain: bool) -> str | None:
     """Rule 13c: the measured `a` (DOF i's column as given, no base acceleration subtracted) read as x'' matches
     the second derivative of x `d` (`_same_scale` at a correlation of at least `UNITS_MIN_CORR`) and explains it
@@ -432,12 +439,10 @@ def _relative_acceleration(name: str, i: int, d, a, minus, dt, w, chain: bool) -
     from .._recordings._derivatives import differentiate
 
     bracket = _scale_bracket(d, differentiate(a, dt, 0, w))
-    if bracket is None or not (bracket[0] >= UNITS_MIN_CORR and _same_scale(*bracket)):
+    if not _matches(bracket):
         return None
-    r = minus[0]
-    alone, left = 1.0 - bracket[0] ** 2, 1.0 - r**2
-    matches = r >= UNITS_MIN_CORR and _same_scale(*minus)
-    if not (left > RELATIVE_A_RATIO * alone or (not matches and alone < left)):
+    alone, left = 1.0 - bracket[0] ** 2, 1.0 - minus[0] ** 2
+    if not (left > RELATIVE_A_RATIO * alone or (not _matches(minus) and alone < left)):
         return None
     where = "every a column (each mass's)" if chain else "the a column"
     return (f"{name}: the measured acceleration of DOF {i} is the relative one, not the absolute one: the column "
@@ -454,8 +459,7 @@ def _reversed_accelerometer(d, flipped_rel, dt, w) -> bool:
     wells: a - b does not correlate with x'' where b is large)."""
     from .._recordings._derivatives import differentiate
 
-    bracket = _scale_bracket(d, -differentiate(flipped_rel, dt, 0, w))
-    return bracket is not None and bracket[0] >= UNITS_MIN_CORR and _same_scale(*bracket)
+    return _matches(_scale_bracket(d, -differentiate(flipped_rel, dt, 0, w)))
 
 
 def _time_unit(name: str, out: list[str], scales: dict) -> list[str]:
