@@ -277,6 +277,31 @@ def test_matlab_v73_files_read_as_the_older_formats(tmp_path):
     assert got["qm"].shape == (500, 1) and got["gtau"].shape == (1, 1)
 
 
+def test_column_mapping_sums_and_differences(tmp_path):
+    """A relative acceleration made absolute (a = acc + base_acc, rule 13c's fix), an offset removed, a leading
+    minus, exponents that are not terms (1e-3, 2E+1), names holding + or -, a column added to each of a chain's
+    columns; mismatched lengths named."""
+    t = np.arange(500) * 1e-2
+    acc, base, q = np.sin(t), 0.3 * np.cos(3 * t), 0.01 * np.sin(2 * t) + 0.2
+    lab = {"t": t, "acc": acc, "base": base, "q": q, "x-ref": q - 0.2, "q+off": q, "short": t[:10],
+           "q2": np.stack([q, 2 * q], axis=1)}
+    np.savez(tmp_path / "run.npz", **lab)
+    r = g.load_recording(tmp_path / "run.npz", {"x": "q - 0.2", "a": "acc+base", "base_acc": "base"})
+    np.testing.assert_allclose(r.a[:, 0], acc + base, rtol=1e-15)
+    np.testing.assert_allclose(r.x[:, 0], q - 0.2, rtol=1e-13)
+    r = g.load_recording(tmp_path / "run.npz", {"x": "-q*1e-3 + 2E+1*q", "a": "-acc - base*2"})
+    np.testing.assert_allclose(r.x[:, 0], -q * 1e-3 + 20 * q, rtol=1e-14)
+    np.testing.assert_allclose(r.a[:, 0], -acc - 2 * base, rtol=1e-15)
+    r = g.load_recording(tmp_path / "run.npz", {"x": "x-ref + q+off", "a": "acc"})  # names, not operations
+    np.testing.assert_allclose(r.x[:, 0], 2 * q - 0.2, rtol=1e-13)
+    r = g.load_recording(tmp_path / "run.npz", {"x": "q2 + base"})
+    np.testing.assert_allclose(r.x, lab["q2"] + base[:, None], rtol=1e-15)
+    with pytest.raises(g.GMRInputError, match=r"x='q \+ short': its terms have different shapes"):
+        g.load_recording(tmp_path / "run.npz", {"x": "q + short"})
+    with pytest.raises(g.GMRInputError, match=r"terms by \+ or -"):
+        g.load_recording(tmp_path / "run.npz", {"x": "q + "})
+
+
 def test_cli_columns_option():
     from gmr_jax._cli._args import columns
 

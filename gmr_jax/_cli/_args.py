@@ -215,8 +215,8 @@ def start_configuration(spec, wells):
 
 
 COLUMNS_HELP = ("map the recording's fields to the file's variables, as the lab stored them: "
-                "'x=qm,force=gtau*vir' (names and numbers joined by * or /; one DOF per ';': "
-                "'x=q1*1e-3;q2*1e-3'); needed for .mat/.npz/.csv files whose names are not t, x, ...")
+                "'x=qm,force=gtau*vir' (names and numbers joined by * or /, terms by + or -: "
+                "'a=acc+base_acc'; one DOF per ';': 'x=q1*1e-3;q2*1e-3'); needed for .mat/.npz/.csv files whose names are not t, x, ...")
 
 
 def add_columns_option(parser) -> None:

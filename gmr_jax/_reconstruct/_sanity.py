@@ -449,8 +449,8 @@ def _relative_acceleration(name: str, i: int, d, a, minus, dt, w, chain: bool) -
             f"itself is the second derivative of its x (share unexplained {alone:.2g}), the column minus the base "
             f"acceleration is not ({left:.2g}); the fit takes a as the absolute acceleration of the mass, a = x'' + "
             f"base_acc (what an accelerometer on it gives), and would put the base's push into the restoring and "
-            f"damping forces: add the base acceleration to {where}, or remove the a columns (x is then "
-            f"differentiated)")
+            f"damping forces: add the base acceleration to {where} (`gmr fit --columns a=<a's column>+<base_acc's "
+            f"column>`), or remove the a columns (x is then differentiated)")
 
 
 def _reversed_accelerometer(d, flipped_rel, dt, w) -> bool:

@@ -89,19 +89,29 @@ def read_mat73(path: Path, src: str) -> dict:
     return out
 
 
-def _evaluate(expr: str, variables: dict, field: str, src: str):
-    # a file's names that hold * or / ("v [m/s]") are names, not operations: matched whole, longest first
-    given, names = expr, sorted(variables)
-    named = sorted((k for k in variables if ("*" in k or "/" in k) and k in expr), key=len, reverse=True)
-    alias = {}
-    for j, k in enumerate(named):
-        alias[f"\x00{j}\x00"] = k
-        expr = expr.replace(k, f"\x00{j}\x00")
-    if alias:
-        variables = {**variables, **{a: variables[k] for a, k in alias.items()}}
+#: the text before a + or - that makes it the sign of a number's exponent (1e-3, 2.5E+2), not a join
+_EXPONENT = re.compile(r"(?:^|[^\w.])(?:\d+\.?\d*|\.\d+)[eE]$")
+
+
+def _terms(expr: str) -> list[tuple[float, str]]:
+    """'a + b*2 - c' -> [(1, 'a'), (1, 'b*2'), (-1, 'c')]; a leading sign is the first term's."""
+    out, sign, start = [], 1.0, 0
+    for i, c in enumerate(expr):
+        if c in "+-" and not _EXPONENT.search(expr[:i].rstrip()):
+            out.append((sign, expr[start:i]))
+            sign, start = (1.0 if c == "+" else -1.0), i + 1
+    out.append((sign, expr[start:]))
+    if len(out) > 1 and not out[0][1].strip():
+        out = out[1:]
+    return out
+
+
+def _product(expr: str, given: str, variables: dict, names: list, field: str, src: str):
+    """A product/quotient of names and numbers, left to right."""
     parts = _TOKEN.split(expr.strip())
     if not expr.strip() or len(parts) % 2 == 0:
-        raise GMRInputError(f"{src}: column mapping {field}={given!r}: write names and numbers joined by * or /")
+        raise GMRInputError(f"{src}: column mapping {field}={given!r}: write names and numbers joined by * or /, "
+                            f"terms by + or -")
     value, op = None, "*"
     for i, tok in enumerate(parts):
         if i % 2:
@@ -116,6 +126,36 @@ def _evaluate(expr: str, variables: dict, field: str, src: str):
                 raise GMRInputError(f"{src}: column mapping {field}={given!r}: {tok!r} is neither a variable of the "
                                     f"file nor a number; the file has {names}") from None
         value = term if value is None else (value * term if op == "*" else value / term)
+    return value
+
+
+def _evaluate(expr: str, variables: dict, field: str, src: str):
+    """`expr`: terms joined by + or - (a leading - negates), each a product/quotient of the file's names and
+    numbers (`*`, `/` bind first): 'x=q*1e-3', 'force=gtau*vir', 'a=acc+base_acc' (a relative acceleration
+    made absolute)."""
+    # a file's names that hold an operator ("v [m/s]", "x-ref") are names, not operations: matched whole, longest first
+    given, names = expr, sorted(variables)
+    named = sorted((k for k in variables if any(c in k for c in "*/+-") and k in expr), key=len, reverse=True)
+    alias = {}
+    for j, k in enumerate(named):
+        alias[f"\x00{j}\x00"] = k
+        expr = expr.replace(k, f"\x00{j}\x00")
+    if alias:
+        variables = {**variables, **{a: variables[k] for a, k in alias.items()}}
+    value = None
+    for sgn, piece in _terms(expr):
+        term = sgn * _product(piece, given, variables, names, field, src)
+        if value is not None:  # a column (N,) added to columns (N, D) is added to each
+            if np.ndim(value) == 1 and np.ndim(term) == 2 and len(value) == len(term):
+                value = value[:, None]
+            elif np.ndim(term) == 1 and np.ndim(value) == 2 and len(value) == len(term):
+                term = term[:, None]
+            try:
+                term = value + term
+            except ValueError:
+                raise GMRInputError(f"{src}: column mapping {field}={given!r}: its terms have different shapes "
+                                    f"({np.shape(value)} and {np.shape(term)}); add columns of the same length") from None
+        value = term
     return value
 
 
