@@ -378,3 +378,22 @@ def test_coulomb_from_x_only_leaves_out_the_rows_at_each_reversal(monkeypatch):
         got[on] = f["coefficient"]
     assert abs(got[True] - fc) < 0.01 * fc, got
     assert abs(got[False] - fc) > 3 * abs(got[True] - fc) and abs(got[False] - fc) > 0.02 * fc, got  # the teeth
+
+
+def test_an_augmented_damping_that_feeds_energy_in_is_warned():
+    """Audit 8: discover trained on a crossing record only re-calibrated 0.09 v + 0.34 v|v| to -0.36 v + 2.47 v|v|
+    (negative below |v| = 0.14: a limit cycle at each well) with no warning; now said, and not where the given
+    model's damping was passive too."""
+    from gmr_jax._discover._discover import _not_passive
+
+    def duffing(b):
+        return gmr_jax.GlobalModel(masses=np.array([0.1]), stiffness=np.array([[0.0, -100.0, 0.0, 1e6]]),
+                             velocity_damping=np.array([b]), position_damping=np.zeros((1, 1)))
+
+    t = np.arange(2000) * 1e-3
+    rec = gmr_jax.Recording(t=t, x=0.02 * np.sin(2 * np.pi * 3 * t), base_acc=np.zeros_like(t), masses=np.array([0.1]))
+    given, aug = duffing([0.0, 0.09, 0.34]), duffing([0.0, -0.36, 2.47])
+    msg = _not_passive(aug, given, [rec])
+    assert len(msg) == 1 and "feeds energy in" in msg[0] and "keep the given model's damping" in msg[0]
+    assert _not_passive(given, given, [rec]) == []
+    assert _not_passive(aug, aug, [rec]) == []  # the given model's fault is the fit's to say

@@ -92,6 +92,15 @@ def test_missing_derivatives_are_estimated(joint_data):
     assert restoring_error(res.value, s.truth, 0, s.x_range[0]) < 0.03
 
 
+def test_wells_recorded_with_different_sensors(joint_data):
+    """One well's file x only, the other's x, v, a (audit 8: the local fits' stats did not stack, an internal
+    error): fitted as any other pair."""
+    s, recs = joint_data["position_independent"]
+    mixed = [g.Recording(t=recs[0].t, x=recs[0].x, base_acc=recs[0].base_acc, name=recs[0].name), recs[1]]
+    res = g.reconstruct(mixed, g.Library(5, 5))
+    assert restoring_error(res.value, s.truth, 0, s.x_range[0]) < 0.03
+
+
 def test_keep_exempts_terms_from_the_threshold():
     """A small but well-determined x v term: a large manual threshold removes it, `keep`
     brings it back with the least-squares value (and a finite standard error)."""

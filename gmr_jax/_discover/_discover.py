@@ -571,6 +571,7 @@ def discover(
     worse = (after["horizon_nrmse"] > before["horizon_nrmse"] * 1.05 if short else
              after["nrmse"] > before["nrmse"] * 1.05)
     warns = [r.free_decay_sentence("it was taken") for r in list(recordings) + list(holdout or []) if not r.driven]
+    warns += _not_passive(aug, model, list(recordings) + list(holdout or []))
     if worse:
         warns.append(
             f"the augmented model is worse than the given one on the {before['on']} ("
@@ -588,3 +589,28 @@ def discover(
     stats = {"findings": len(findings), "kind": kind, "form": form, "warnings": warns}
     return raise_if_failed(Solution(value=report, result=result, stats=stats), throw, "discover",
                            "the augmented model has non-finite coefficients")
+
+
+def _not_passive(aug: GlobalModel, model: GlobalModel, recordings) -> list[str]:
+    """The augmented model's damping where it feeds energy in over the span it is used on (`feeds_energy`: between
+    its wells and at the speeds of a fall into them), which the given model's did not: a law fitted where the
+    records are fast (a crossing record) can turn negative at the wells' slow speeds (audit 8: 0.09 v + 0.34 v|v| ->
+    -0.36 v + 2.47 v|v|, negative below |v| = 0.14, a limit cycle at each well where the truth rests; no finding and
+    no warning)."""
+    from .._basins._probability import feeds_energy
+    from .._basins._wells import stable_wells
+
+    xs = np.concatenate([np.asarray(r.x, float) for r in recordings if r.x is not None], axis=0)
+    x_range = np.stack([xs.min(axis=0), xs.max(axis=0)], axis=1)
+    try:
+        faults = feeds_energy(aug, stable_wells(aug, x_range), x_range)
+        before = feeds_energy(model, stable_wells(model, x_range), x_range)
+    except Exception:  # noqa: BLE001 - a model without wells in the range: nothing to read here
+        return []
+    if not faults or before:
+        return []
+    return [f"the augmented model's damping feeds energy in where it is used ({'; '.join(faults)}; between its wells "
+            f"and up to the speed of a fall into them): a structure that is not passive, whose wells the augmented "
+            f"model cannot rest in; its damping changes are not physical: keep the given model's damping, or add "
+            f"recordings at the wells (slow motion) to the estimation records"]
+

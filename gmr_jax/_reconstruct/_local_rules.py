@@ -107,7 +107,25 @@ def _fit_wells(xs, vs, ys, w, library, solver, select, keep=None, noise=None, x_
     band = band or [None] * xs.shape[0]
     sols = [fit_local(xs[k], vs[k], ys[k], library, solver, select, weights=w[k], keep=keep, noise=noise[k],
                       x_noise=x_noise[k], band=band[k], throw=False) for k in range(xs.shape[0])]
-    return _stack(sols)
+    return _stack(_same_stats(sols))
+
+
+def _same_stats(sols):
+    """The fits with one set of `stats` keys: a key only some wells report (`noise_ratio`, where a well's target
+    holds a differentiated signal and another's a measured a: one file x only, the other x, v, a) is NaN (False for
+    a flag) at the others, so that the wells stack."""
+    keys = {}
+    for s in sols:
+        keys.update({k: v for k, v in s.stats.items() if k not in keys})
+    if all(set(s.stats) == set(keys) for s in sols):
+        return sols
+
+    def blank(v):
+        v = jnp.asarray(v)
+        return jnp.zeros_like(v) if v.dtype == bool else jnp.full_like(v, jnp.nan, dtype=jnp.result_type(v, float))
+
+    return [eqx.tree_at(lambda t: t.stats, s, {k: s.stats[k] if k in s.stats else blank(v) for k, v in keys.items()})
+            for s in sols]
 
 
 @eqx.filter_jit

@@ -42,6 +42,7 @@ from . import (
     _sanity,
     _shape_prior,
     _velocity_noise,
+    _window_check,
 )
 from ._damping_orders import add_order_vectors, unresolved_orders
 from ._damping_slopes import add_slope_vectors, slope_vectors, unresolved_slopes
@@ -134,6 +135,7 @@ def _resolve(recordings, masses, topology, min_recordings=2, what="fit", exclude
         warnings += _sanity.check_clipping(r.name, _measured_columns(r))
         warnings += _sanity.check_missing_input(r.name, r.x, r.driven)
         warnings += _sanity.check_units(r.name, r, topology)
+        warnings += _sanity.check_acceleration_offset(r.name, r, topology)
     recs = [r.complete(topology, exclude_center=exclude_center) for r in recs]  # True: x'' leaves out x(t)
     return recs, masses, topology, warnings
 
@@ -992,6 +994,7 @@ def reconstruct(
     with different masses, inconsistent shapes) raise `GMRInputError` before anything is
     computed.
     """
+    given = dict(locals())  # the call's arguments, for rule 14d's refit (`_window_check`)
     relieve_map_pressure()  # a long session's compiled programs (`_config.map_pressure`)
     failure = _Failure("reconstruct", throw)
     say = progress or (lambda msg: None)
@@ -1230,6 +1233,14 @@ def reconstruct(
     resolution = _resolution.resolution_report(recs, targets, [wl[2] for wl in wells], reports, model, library,
                                                masses, topology, noises)  # what each well resolved, excitation advice
     warnings += resolution.warnings()
+    window_stats = {}
+    if _steady_sines(recordings) and _window_check.derived_from_x(recordings) and _window_check.nonlinear(model):
+        say("damping law against the derivative window (rule 14d)")
+        refit = lambda r: reconstruct(**{**given, "recordings": r, "throw": False, "progress": None})  # noqa: E731
+        found, window_stats = _window_check.check(refit, recordings, model, topology, structured_noise)
+        warnings += found
+    for i, st in window_stats.items():
+        reports[i].stats["window_check"] = st
     _emit(warnings)
     sol = _solution(model, failure, "GMR", library, reports, training, warnings, recs)
     sol.stats["resolution"] = resolution

@@ -158,7 +158,7 @@ class Recording:
         return b, f
 
     def complete(self, topology: str = "chain", window: int | None = None,
-                 exclude_center: bool = False) -> "Recording":
+                 exclude_center: bool = False, window_scale: float = 1.0) -> "Recording":
         """Fill missing `v` and `a` by Savitzky-Golay differentiation of x (recorded in
         `derived`; of a measured v when x was integrated from it). `a` is absolute: x'' plus base
         acceleration (chain: cumulated over cells). An acceleration-only recording's integrated
@@ -167,7 +167,8 @@ class Recording:
         there (a regression on x(t) needs it; a first derivative's centre weight is 0 already).
         `derivation` then says, per derived signal, what it was differentiated from, the
         order, the window of each column and whether the centre was left out (the noise model
-        of `reconstruct`'s local fits, `_fit/_target_noise.py`)."""
+        of `reconstruct`'s local fits, `_fit/_target_noise.py`). `window_scale`: the automatic
+        windows scaled by it (odd, at least polyorder + 2; `reconstruct`'s rule 14d refits at 0.7)."""
         x, v, a, derived = self.x, self.v, self.a, list(self.derived)
         info = self.integration
         how = dict(self.derivation or {})
@@ -184,7 +185,10 @@ class Recording:
                 "cell deformations" if topo.name == "chain" else
                 "displacement of each mass relative to the base") + f" ({topo.name})"}
         def windows(sig):  # chosen once per signal, then applied (and recorded) as chosen
-            return [window or (auto_window(c, self.dt) if np.ptp(c) > 0 else None) for c in sig.T]
+            return [window or (scaled(auto_window(c, self.dt)) if np.ptp(c) > 0 else None) for c in sig.T]
+
+        def scaled(w):
+            return w if window_scale == 1.0 else max(int(round(window_scale * w)) | 1, 7)
 
         x_windows = windows(x) if v is None or (a is None and self.derivative_source() == "x") else None
         if v is None:
