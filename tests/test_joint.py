@@ -568,3 +568,50 @@ def test_the_noise_of_a_measured_v_hands_the_damping_to_the_joint_regression(mon
         out[gate] = (st["coordination"], len(note), damping_coverage(sol.value, system))
     assert out[default][:2] == ("gls + joint damping", 1) and out[default][2] >= 0.9, out
     assert out[0.0][:2] == ("gls", 0) and out[0.0][2] < 0.9, out  # measured 64 %
+
+
+def test_rule_14d_compares_the_damping_law_across_derivative_windows(monkeypatch):
+    """Rule 14d's logic on stand-in fits: a refit whose velocity terms differ is warned with both laws; the same
+    terms, a viscous-only choice or a refit inside the check (no recursion) are not."""
+    import gmr_jax._reconstruct._window_check as wc
+
+    def model(b):
+        return g.GlobalModel(masses=np.ones(1), stiffness=np.array([[0.0, -1.0, 0.0, 1.0]]),
+                             velocity_damping=np.array([b]), position_damping=np.zeros((1, 1)))
+
+    t = np.arange(1000) * 0.01
+    rec = g.Recording(t=t, x=0.1 * np.sin(t) + 1.0, base_acc=np.sin(t))
+    cube, drag = model([0.0, 0.19, 0.0, 0.062]), model([0.0, 0.18, 0.048])
+    fit = lambda recs: g.Solution(value=drag, result=g.RESULTS.successful, stats={})  # noqa: E731
+    msgs, stats = wc.check(fit, [rec], cube, g.Independent(), False)
+    assert len(msgs) == 1 and "0.19 v + 0.062 v^3" in msgs[0] and "0.18 v + 0.048 sgn(v)|v|^2" in msgs[0]
+    assert stats[0]["same_terms"] is False
+    same = lambda recs: g.Solution(value=model([0.0, 0.2, 0.0, 0.05]), result=g.RESULTS.successful, stats={})  # noqa: E731
+    assert wc.check(same, [rec], cube, g.Independent(), False)[0] == []
+    assert wc.check(fit, [rec], model([0.0, 0.2]), g.Independent(), False) == ([], {})  # viscous only: not run
+    measured = g.Recording(t=t, x=rec.x, v=np.cos(t), a=np.zeros_like(t), base_acc=rec.base_acc)
+    assert wc.check(fit, [measured], cube, g.Independent(), False) == ([], {})  # v measured: not run
+    monkeypatch.setattr(wc, "_ACTIVE", __import__("contextvars").ContextVar("t", default=True))
+    assert wc.check(fit, [rec], cube, g.Independent(), False) == ([], {})  # inside a check's refit
+
+
+@pytest.mark.slow  # two reconstructions of single-tone records (~60 s cold)
+def test_rule_14d_warns_where_the_derivative_window_decides_the_law():
+    """The study case (studies/single_tone_budget.py): x only, 60 dB, 2.5x the base amplitude, seed 0: the default
+    chooses v^3 for the truth's v|v| with no rule-14 warning; rule 14d names both laws. At 2x the law is the same
+    at both windows, and nothing is said."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "studies"))
+    import single_tone_budget as sb
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sol = g.reconstruct(sb.tone_recordings("x", 60, 0, 2.5), throw=False)
+        calm = g.reconstruct(sb.tone_recordings("x", 60, 0, 2.0), throw=False)
+    msgs = [m for m in sol.stats["warnings"] if "rests on how x was differentiated" in m]
+    assert len(msgs) == 1 and "v^3" in msgs[0] and "sgn(v)|v|^2" in msgs[0], sol.stats["warnings"]
+    assert sol.stats["dofs"][0].stats["window_check"]["same_terms"] is False
+    assert not any("rests on how x was differentiated" in m for m in calm.stats["warnings"])
+    assert calm.stats["dofs"][0].stats["window_check"]["same_terms"] is True

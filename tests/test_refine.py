@@ -435,3 +435,20 @@ def test_a_restoring_law_moved_beyond_its_band_is_warned():
         assert not _moved_law_warnings(band, moved, [rec])
     w = _moved_law_warnings(given, dataclasses.replace(given, stiffness=given.stiffness * 1.03), [rec])
     assert w and "moved the restoring law by 3 %" in w[0] and "refine --free damping" in w[0]
+
+
+def test_windows_no_model_predicts_are_warned():
+    """Audit 8: a crossing record refined over 1 s windows, NRMSE 1.084 -> 1.005 and a law 23 % off, no warning;
+    now said (with a shorter window as the fix), and not where the given model predicts its windows."""
+    from types import SimpleNamespace
+
+    from gmr_jax._refine._refine import _unpredicted_warnings
+
+    def train(before, after):
+        return {"before": SimpleNamespace(nrmse=before), "after": SimpleNamespace(nrmse=after)}
+
+    msg = _unpredicted_warnings(train(1.084, 1.005), 1.0)
+    assert len(msg) == 1 and "neither model predicts the training windows of 1 s" in msg[0]
+    assert "--window 0.2" in msg[0]
+    assert _unpredicted_warnings(train(0.3, 0.05), 1.0) == []  # the given model predicts them: a real refinement
+    assert _unpredicted_warnings(train(0.9, 0.2), 1.0) == []  # the refined one does

@@ -167,7 +167,8 @@ def run(args) -> int:
         print(line)
     for line in _derivation_notes(recs):
         print(line)
-    if masses is None and all(r.masses is None for r in recs) and model.n_dof == 1:  # a chain's: a warning
+    forced = any(r.force is not None and np.any(np.asarray(r.force) != 0) for r in recs)  # a force input: a warning
+    if masses is None and all(r.masses is None for r in recs) and model.n_dof == 1 and not forced:  # a chain's too
         print("  note: no masses in the recordings and no --masses: taken as 1, so every coefficient is a force "
               "per unit mass (pass --masses M or a column m in the CSV for forces in the recordings' units)")
     if png is not None:

@@ -123,6 +123,16 @@ def _resolve(recordings, masses, topology, min_recordings=2, what="fit", exclude
                             f"{topology.name} the cells carry the masses beyond them, so the cell forces are right "
                             f"(per unit mass) only if the {d} masses are equal: give them (--masses M0,M1,..., a "
                             f"column m0, m1, ... in each CSV, or Recording(masses=...))")
+        forced = [r.name for r in recs if r.force is not None and np.any(np.asarray(r.force) != 0)]
+        if not found and forced:
+            # a force input does not scale out as a base input does: y = force - m a is wrong for every m but the
+            # true one (audit 8: a 0.1 kg oscillator driven by a shaker force, no mass given: damping 10x off,
+            # a degree-7 law, and the warnings blamed hops between wells)
+            warnings.append(f"no masses given (none in the recordings, no masses=/--masses) and {forced[0]}"
+                            f"{' and others are' if len(forced) > 1 else ' is'} driven by a force: each mass is taken "
+                            f"as 1, and with a force input that is not a rescaling (the fit balances the force "
+                            f"against m a): every coefficient is wrong unless the mass is 1 in the force's units; "
+                            f"give it (--masses M, a column m in each CSV, or Recording(masses=...))")
     masses = np.asarray(masses, float).reshape(-1)
     if masses.shape[0] != d or np.any(masses <= 0) or not np.all(np.isfinite(masses)):
         raise GMRInputError(f"masses must be {d} positive numbers, got {masses.tolist()}")
