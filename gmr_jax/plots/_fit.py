@@ -60,6 +60,7 @@ def _damping_band(model, level: float = 0.95):
 def _dress(ax, xlabel: str, ylabel: str, title: str) -> None:
     """The zero line, labels, title and legend every panel of the figure carries."""
     ax.axhline(0.0, color="0.7", lw=0.8)
+    ax.locator_params(axis="x", nbins=5)  # labels of mm-scale data in m ('-0.015') overlapped at the default 7+
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.set_title(title, fontsize=9)
