@@ -26,10 +26,9 @@ import warnings
 import jax
 import jax.numpy as jnp
 import numpy as np
+import single_tone as st  # studies/ is on sys.path when run as a script
 
 import gmr_jax as gj
-
-import single_tone as st  # noqa: E402  (studies/ is on sys.path when run as a script)
 
 SYSTEM = st.SYSTEM
 SENSINGS = ("x", "v", "xva")
