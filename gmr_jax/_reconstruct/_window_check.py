@@ -54,8 +54,11 @@ def damping_text(model, i: int) -> str:
 
 
 def rewindowed(recordings, topology, exclude_center: bool, scale: float = WINDOW_SCALE):
-    """The recordings with v and a differentiated from x at `scale` of each column's automatic window."""
-    return [r.complete(topology, exclude_center=exclude_center, window_scale=scale)
+    """The recordings with v and a differentiated from x at `scale` of each column's automatic window (validated
+    first, as `reconstruct` does: time stamps put on their grid before anything is differentiated)."""
+    from .._recordings._recording import validate
+
+    return [validate(r, r.name).complete(topology, exclude_center=exclude_center, window_scale=scale)
             if r.v is None and r.x is not None and r.integration is None else r for r in recordings]
 
 
