@@ -599,9 +599,9 @@ def _not_passive(aug: GlobalModel, model: GlobalModel, recordings) -> list[str]:
     no warning)."""
     from .._basins._probability import feeds_energy
     from .._basins._wells import stable_wells
+    from .._model._metadata import ranges
 
-    xs = np.concatenate([np.asarray(r.x, float) for r in recordings if r.x is not None], axis=0)
-    x_range = np.stack([xs.min(axis=0), xs.max(axis=0)], axis=1)
+    x_range = np.asarray(ranges([r for r in recordings if r.x is not None], "x"))
     try:
         faults = feeds_energy(aug, stable_wells(aug, x_range), x_range)
         before = feeds_energy(model, stable_wells(model, x_range), x_range)

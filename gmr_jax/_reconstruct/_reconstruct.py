@@ -1244,10 +1244,9 @@ def reconstruct(
                                                masses, topology, noises)  # what each well resolved, excitation advice
     warnings += resolution.warnings()
     window_stats = {}
-    if _steady_sines(recordings) and _window_check.derived_from_x(recordings) and _window_check.nonlinear(model):
-        say("damping law against the derivative window (rule 14d)")
+    if _steady_sines(recordings):  # rule 14d (`_window_check`: x-only records, a law beyond the viscous term)
         refit = lambda r: reconstruct(**{**given, "recordings": r, "throw": False, "progress": None})  # noqa: E731
-        found, window_stats = _window_check.check(refit, recordings, model, topology, structured_noise)
+        found, window_stats = _window_check.check(refit, recordings, model, topology, structured_noise, say)
         warnings += found
     for i, st in window_stats.items():
         reports[i].stats["window_check"] = st

@@ -279,7 +279,7 @@ def check_acceleration_offset(name: str, rec, topology) -> list[str]:
     holds an offset (an accelerometer's DC bias, gravity on a tilted sensor), which the fit takes as a constant
     force at that well, moving its restoring force. v(T) - v(0) from the measured v, else from x (Savitzky-Golay).
     Skipped: a derived a, an x integrated from a, a record without an input column."""
-    from .._recordings._derivatives import auto_window, differentiate
+    from .._recordings._derivatives import differentiate
 
     info = rec.integration or {}
     if rec.a is None or "a" in rec.derived or info.get("from") == "a" or not rec.driven:
@@ -292,13 +292,14 @@ def check_acceleration_offset(name: str, rec, topology) -> list[str]:
     if rec.v is not None and "v" not in rec.derived:
         v = np.asarray(rec.v, float)
     else:
-        v = np.column_stack([differentiate(c, float(rec.dt), 1, auto_window(c, float(rec.dt))) if np.ptp(c) > 0
-                             else np.zeros_like(c) for c in x.T])
-    duration = float(rec.t[-1] - rec.t[0])
+        v = np.column_stack([differentiate(c, float(rec.dt), 1) if np.ptp(c) > 0 else np.zeros_like(c)
+                             for c in x.T])
+    allowed = (v[-1] - v[0]) / float(rec.t[-1] - rec.t[0])  # the mean of x'' the motion allows
+    mean = rel.mean(axis=0)
     out = []
     for i in range(rel.shape[1]):
         spread = float(np.std(rel[:, i]))
-        excess = float(np.mean(rel[:, i])) - float(v[-1, i] - v[0, i]) / duration
+        excess = float(mean[i] - allowed[i])
         if not spread > 0 or abs(excess) <= OFFSET_SHARE * spread:
             continue
         col = "a" if rel.shape[1] == 1 else f"a{i}"
@@ -306,8 +307,7 @@ def check_acceleration_offset(name: str, rec, topology) -> list[str]:
                else f"remove it at the accelerometer of mass {i} or {i - 1} (a cell's x'' is the difference of theirs)")
         out.append(f"{name}: the measured acceleration of DOF {i} holds an offset of {excess:.4g} ({100 * abs(excess) / spread:.2g} "
                    f"% of its RMS): a - base_acc is x'', whose mean over a record is the change of speed over its "
-                   f"length ({float(v[-1, i] - v[0, i]) / duration:.3g} here), and it averages "
-                   f"{float(np.mean(rel[:, i])):.4g}; an accelerometer's DC bias or gravity on a tilted sensor. The "
+                   f"length ({float(allowed[i]):.3g} here), and it averages {float(mean[i]):.4g}; an accelerometer's DC bias or gravity on a tilted sensor. The "
                    f"fit takes it as a constant force at this well, which moves its restoring force and the wells' "
                    f"law between them: {fix}, or drop the a column (x is then differentiated)")
     return out

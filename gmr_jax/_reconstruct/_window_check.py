@@ -24,21 +24,24 @@ from .._fit._library import POSITION_DAMPING, VELOCITY_DAMPING, term_name
 
 #: the refit differentiates x at this share of each column's automatic window
 WINDOW_SCALE = 0.7
-#: a coefficient this small relative to the law's largest is taken as absent (a pruned term is an exact 0)
-ABSENT = 0.0
 _ACTIVE = contextvars.ContextVar("gmr_window_check", default=False)
+
+
+def _from_x(rec) -> bool:
+    """Whether the recording's v will be differentiated from its measured x."""
+    return rec.v is None and rec.x is not None and rec.integration is None
 
 
 def derived_from_x(recordings) -> bool:
     """Whether some recording's v will be differentiated from its measured x."""
-    return any(r.v is None and r.x is not None and r.integration is None for r in recordings)
+    return any(_from_x(r) for r in recordings)
 
 
 def support(model, i: int) -> tuple[tuple[int, ...], tuple[int, ...]]:
     """The velocity-damping orders j (B_j of sgn(v)|v|^j) and position-damping orders (C_j of x^j v) of DOF i
-    with a nonzero coefficient."""
+    with a nonzero coefficient (a pruned term is an exact 0)."""
     b, c = np.asarray(model.velocity_damping[i], float), np.asarray(model.position_damping[i], float)
-    return tuple(np.nonzero(np.abs(b) > ABSENT)[0].tolist()), tuple(np.nonzero(np.abs(c) > ABSENT)[0].tolist())
+    return tuple(np.flatnonzero(b).tolist()), tuple(np.flatnonzero(c).tolist())
 
 
 def nonlinear(model) -> bool:
@@ -59,14 +62,17 @@ def rewindowed(recordings, topology, exclude_center: bool, scale: float = WINDOW
     from .._recordings._recording import validate
 
     return [validate(r, r.name).complete(topology, exclude_center=exclude_center, window_scale=scale)
-            if r.v is None and r.x is not None and r.integration is None else r for r in recordings]
+            if _from_x(r) else r for r in recordings]
 
 
-def check(fit, recordings, model, topology, exclude_center: bool) -> tuple[list[str], dict]:
+def check(fit, recordings, model, topology, exclude_center: bool, say=None) -> tuple[list[str], dict]:
     """Rule 14d (module docstring): `fit(recordings)` is `reconstruct` with the caller's arguments; its
-    warnings are not the caller's. Returns (warnings, stats: per DOF the refit's damping and whether it differs)."""
+    warnings are not the caller's; `say`: the caller's progress, told when the refit runs. Returns (warnings,
+    stats: per DOF the refit's damping and whether it differs)."""
     if _ACTIVE.get() or not derived_from_x(recordings) or not nonlinear(model):
         return [], {}
+    if say is not None:
+        say("damping law against the derivative window (rule 14d)")
     token = _ACTIVE.set(True)
     try:
         with warnings.catch_warnings():

@@ -13,7 +13,7 @@ import numpy as np
 
 from .._errors import GMRDataWarning, GMRInputError, describe, is_tracer
 from .._topology import as_topology
-from ._derivatives import auto_window, differentiate
+from ._derivatives import _odd_window, auto_window, differentiate
 from ._integrate import integrated_signals
 from ._mapping import repeated_value
 
@@ -185,10 +185,10 @@ class Recording:
                 "cell deformations" if topo.name == "chain" else
                 "displacement of each mass relative to the base") + f" ({topo.name})"}
         def windows(sig):  # chosen once per signal, then applied (and recorded) as chosen
-            return [window or (scaled(auto_window(c, self.dt)) if np.ptp(c) > 0 else None) for c in sig.T]
+            return [window or (scaled(auto_window(c, self.dt), c.size) if np.ptp(c) > 0 else None) for c in sig.T]
 
-        def scaled(w):
-            return w if window_scale == 1.0 else max(int(round(window_scale * w)) | 1, 7)
+        def scaled(w, n):
+            return w if window_scale == 1.0 else _odd_window(window_scale * w, n, 5)
 
         x_windows = windows(x) if v is None or (a is None and self.derivative_source() == "x") else None
         if v is None:
