@@ -66,6 +66,10 @@ from ._reconstruct._reconstruct import (
     regression_targets as regression_targets,
 )
 from ._reconstruct._resolution import ResolutionReport as ResolutionReport
+from ._reconstruct._estimator import (
+    ReconstructSettings as ReconstructSettings,
+    reconstruct_arrays as reconstruct_arrays,
+)
 
 # simulation
 from ._simulate._frequency import resonance_peaks as resonance_peaks, transmissibility as transmissibility

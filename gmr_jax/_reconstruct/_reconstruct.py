@@ -857,6 +857,7 @@ def reconstruct(
     well_tol: float = 0.1,
     screen_sigma: float | None = 3.0,
     coordination: str = "auto",
+    settings=None,
     keep_low_orders: bool = True,
     keep_restoring_order: int | None = None,
     shared_damping: bool = True,
@@ -902,8 +903,14 @@ def reconstruct(
       were differentiated once from a measured v (velocity only: x integrated from it, the slow
       shift of its drift removal restored, `_slow`): shallow arch, v only, 0.45 %, noise-free to
       45 dB: 14.6 % -> 7.2-9.1 % (the curvature oracle 2.6 %).
-    - `coordination`: "gls" (covariance-weighted, lowest adequate degree) or "hermite" (the
-      paper's exact interpolant); see `coordinate`.
+    - `coordination`: "auto" (default), "gls" (covariance-weighted, lowest adequate degree),
+      "hermite" (the paper's exact interpolant; see `coordinate`), or "evidence": one
+      probabilistic model of every well's records (weak-form rows, a structured Gaussian prior
+      on the global law, hyperparameters and the restoring degree by evidence; the standard
+      errors and the band from its posterior covariance; `reconstruct_arrays`). On "evidence"
+      only `settings`, `masses`, `topology`, `throw` and `progress` apply.
+    - `settings`: a `ReconstructSettings` for `coordination="evidence"` (default: the
+      library's damping order, `well_tol`).
     - `shared_damping`: the position-independent damping sgn(v)|v|^j (j != 1; j = 1 belongs
       to the damping polynomial C(x) v) is one law shared by every well (Eq. 21). A term that
       some wells' fits select and others do not is taken as a local artefact and dropped, and
@@ -1004,6 +1011,8 @@ def reconstruct(
     with different masses, inconsistent shapes) raise `GMRInputError` before anything is
     computed.
     """
+    if coordination == "evidence":
+        return _evidence(recordings, settings, library, masses, topology, well_tol, throw, progress)
     given = dict(locals())  # the call's arguments, for rule 14d's refit (`_window_check`)
     relieve_map_pressure()  # a long session's compiled programs (`_config.map_pressure`)
     failure = _Failure("reconstruct", throw)
@@ -1253,6 +1262,37 @@ def reconstruct(
     _emit(warnings)
     sol = _solution(model, failure, "GMR", library, reports, training, warnings, recs)
     sol.stats["resolution"] = resolution
+    return sol
+
+
+def _evidence(recordings, settings, library, masses, topology, well_tol, throw, progress) -> Solution:
+    """`reconstruct` on one probabilistic model of the data (`_estimator`)."""
+    from ._estimator import ReconstructSettings, diagnose, estimate, model_from
+
+    if settings is None:
+        settings = ReconstructSettings(damping_order=library.damping_order, well_tol=well_tol)
+    relieve_map_pressure()
+    failure = _Failure("reconstruct", throw)
+    say = progress or (lambda msg: None)
+    recs, masses, topology, warnings = _resolve(recordings, masses, topology)
+    d = recs[0].n_dof
+    wells = [_wells(recs, i, settings.well_tol) for i in range(d)]
+    blocks, covs, dof_stats = estimate(recs, masses, topology, settings, wells, say, failure)
+    model = model_from(masses, topology, blocks, covs)
+    say("training scores and checks")
+    training = training_scores(model, recs, masses, topology)
+    warnings += diagnose(recs, wells, model, training)
+    reports = []
+    for i, (_, labels, groups) in enumerate(wells):
+        eq = np.array([np.mean([recs[k].x[:, i].mean() for k in g]) for g in groups])
+        st = dof_stats[i] | {"K_r": int(dof_stats[i]["degree"]), "K_d": int(settings.damping_order),
+                             "escapes": _sanity.escapes(np.asarray(model.stiffness[i]), eq)}
+        reports.append(DofReport(equilibria=eq, local_coef=np.zeros((len(groups), 0)),
+                                 local_stderr=np.zeros((len(groups), 0)), thresholds=np.zeros(len(groups)),
+                                 recordings_per_well=[[recs[k].name for k in g] for g in groups], stats=st))
+    _emit(warnings)
+    sol = _solution(model, failure, "GMR", library, reports, training, warnings, recs)
+    sol.stats["settings"] = settings
     return sol
 
 

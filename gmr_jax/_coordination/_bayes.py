@@ -1,0 +1,278 @@
+"""One probabilistic model of every well's data: weak-form rows, a structured Gaussian prior on
+the global law, hyperparameters by evidence.
+
+Per DOF, the force balance y(t) = F(x) + B(v) + C(x) v, with
+
+    F(x) = Y sum_k a_k T_k(u),   B(v) = Y sum_j b_j sgn(w)|w|^j,   C(x) v = Y sum_j c_j u^j w,
+
+u = (x - x_c) / h (the records' span mapped to [-1, 1]), w = v / V (V: the largest recorded
+speed), Y the RMS of the rows' target, T_k Chebyshev polynomials. It is multiplied by test
+functions phi_m(t) = phi(t - t_m) on disjoint windows and integrated (the weak form): the
+inertia m x'' enters as m phi'' x, the position damping u^j w = d/dt [h u^(j+1) / ((j+1) V)]
+as -phi' times that, so neither needs a differentiated signal; rows from disjoint windows
+carry independent noise. Each well w has its own noise variance s_w^2.
+
+Prior: a_k ~ N(0, s_F^2 rho_F^(2k)) (the Chebyshev coefficients of a function analytic on a
+Bernstein ellipse fall geometrically), b_j ~ N(0, s_B^2 rho_B^(2|j-1|)) (viscous first),
+c_j ~ N(0, s_C^2 rho_C^(2(j-1))). The six scales and decays and the wells' noise variances
+maximise the log marginal likelihood (MacKay's evidence); the posterior mean and covariance
+then give the law, its standard errors and its band, one covariance for all three.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import lineax as lx
+import optimistix as optx
+from jaxtyping import Array, Bool, Float, Int
+
+from .._solution import RESULTS, Solution, as_result
+from ._hermite import monomial_map
+
+#: exponent p of the test function phi(s) = (1 - s^2)^p, s in [-1, 1]: phi, phi', phi'' vanish at the ends
+TEST_POWER = 4
+
+
+def test_functions(width: int) -> np.ndarray:
+    """phi, phi', phi'' (3, width) on `width` samples of unit spacing, phi summing to 1.
+
+    The derivatives are corrected (least change) so that summation by parts is exact on
+    polynomials of degree <= 2 in the sample index: sum phi' n^k = -k sum phi n^(k-1),
+    sum phi'' n^k = k (k - 1) sum phi n^(k-2). A record's static offset and trend then cancel
+    exactly, whatever the width."""
+    s = -1.0 + (2.0 * np.arange(width) + 1.0) / width
+    half = width / 2.0  # ds/dt in samples
+    p = TEST_POWER
+    phi = (1.0 - s**2) ** p
+    d1 = -2.0 * p * s * (1.0 - s**2) ** (p - 1) / half
+    d2 = (-2.0 * p * (1.0 - s**2) ** (p - 1) + 4.0 * p * (p - 1) * s**2 * (1.0 - s**2) ** (p - 2)) / half**2
+    norm = phi.sum()
+    phi, d1, d2 = phi / norm, d1 / norm, d2 / norm
+    n = np.arange(width) - (width - 1) / 2.0
+    V = np.stack([n**0, n, n**2], axis=1)
+    m = [np.sum(phi * n**k) for k in range(3)]
+
+    def exact(w, moments):
+        return w + V @ np.linalg.solve(V.T @ V, np.asarray(moments) - V.T @ w)
+
+    d1 = exact(d1, [0.0, -m[0], -2.0 * m[1]])
+    d2 = exact(d2, [0.0, 0.0, 2.0 * m[0]])
+    return np.stack([phi, d1, d2])
+
+
+class Basis(eqx.Module):
+    """Sizes of the three families: restoring T_0..T_K, velocity sgn(w)|w|^0..d, position u^1..d w."""
+
+    degree: int = eqx.field(static=True)
+    damping_order: int = eqx.field(static=True)
+
+    @property
+    def sizes(self) -> tuple[int, int, int]:
+        return self.degree + 1, self.damping_order + 1, self.damping_order
+
+    @property
+    def n(self) -> int:
+        return sum(self.sizes)
+
+    def family(self) -> np.ndarray:
+        """Family index (0, 1, 2) of every column."""
+        return np.concatenate([np.full(n, f) for f, n in enumerate(self.sizes)])
+
+    def decay_power(self) -> np.ndarray:
+        """The exponent of rho in every column's prior variance."""
+        k, d = self.degree, self.damping_order
+        return np.concatenate([np.arange(k + 1), np.abs(np.arange(d + 1) - 1), np.arange(d)]).astype(float)
+
+
+def _chebyshev(u, degree: int):
+    cols = [jnp.ones_like(u), u]
+    for _ in range(2, degree + 1):
+        cols.append(2.0 * u * cols[-1] - cols[-2])
+    return jnp.stack(cols[: degree + 1], axis=-1)
+
+
+def _windows(sig, width: int):
+    """(..., N) -> (..., N // width, width): disjoint windows."""
+    m = sig.shape[-1] // width
+    return sig[..., : m * width].reshape(sig.shape[:-1] + (m, width))
+
+
+def weak_rows(
+    x: Float[Array, "records samples"],
+    v: Float[Array, "records samples"],
+    p: Float[Array, "records samples"],
+    s: Float[Array, "records samples"],
+    mask: Bool[Array, "records samples"],
+    centre, half, speed,
+    basis: Basis,
+    width: int,
+    dt,
+):
+    """Weak-form rows of every record: the target y = p + s'' and the columns of the three
+    families, each integrated against phi on disjoint windows of `width` samples.
+
+    Returns `(rows (R, M, P), target (R, M), valid (R, M))`; a window is valid when every sample
+    in it is."""
+    phi, d1, d2 = (jnp.asarray(f) for f in test_functions(width))
+    u = (x - centre) / half
+    w = v / speed
+    dtw = jnp.asarray(dt)
+    xs_, ws_, ps_, ss_ = (_windows(a, width) for a in (u, w, p, s))
+    target = jnp.einsum("rmn,n->rm", ps_, phi) + jnp.einsum("rmn,n->rm", ss_, d2) / dtw**2
+    restoring = jnp.einsum("rmnk,n->rmk", _chebyshev(xs_, basis.degree), phi)
+    d = basis.damping_order
+    pw = jnp.stack([jnp.sign(ws_) * jnp.abs(ws_) ** j for j in range(d + 1)], axis=-1)
+    velocity = jnp.einsum("rmnj,n->rmj", pw, phi)
+    # viscous and position damping as exact time derivatives: u^j w = (h / V) d/dt u^(j+1) / (j + 1)
+    anti = jnp.stack([xs_ ** (j + 1) / (j + 1) for j in range(d + 1)], axis=-1)
+    exact = -jnp.einsum("rmnj,n->rmj", anti, d1) * (half / speed) / dtw
+    velocity = velocity.at[..., 1].set(exact[..., 0]) if d >= 1 else velocity
+    position = exact[..., 1:]
+    rows = jnp.concatenate([restoring, velocity, position], axis=-1)
+    valid = jnp.all(_windows(mask, width), axis=-1)
+    return rows, target, valid
+
+
+def well_statistics(rows, target, valid, well: Int[Array, " records"], n_wells: int):
+    """Per well: Gram matrix G_w, moment b_w, sum of squares yy_w and row count n_w."""
+    wv = valid.astype(rows.dtype)
+    one_hot = jax.nn.one_hot(well, n_wells, dtype=rows.dtype)  # (R, W)
+    G = jnp.einsum("rw,rm,rmi,rmj->wij", one_hot, wv, rows, rows)
+    b = jnp.einsum("rw,rm,rmi,rm->wi", one_hot, wv, rows, target)
+    yy = jnp.einsum("rw,rm,rm->w", one_hot, wv, target**2)
+    n = jnp.einsum("rw,rm->w", one_hot, wv)
+    return G, b, yy, n
+
+
+class Hyper(eqx.Module):
+    """log scale and logit decay per family (3,), log noise variance per well (W,)."""
+
+    log_scale: Float[Array, " 3"]
+    logit_decay: Float[Array, " 3"]
+    log_noise: Float[Array, " wells"]
+
+
+def prior_sd(h: Hyper, basis: Basis):
+    """The prior's standard deviation of every column, s_f rho_f^power."""
+    fam = jnp.asarray(basis.family())
+    power = jnp.asarray(basis.decay_power())
+    return jnp.exp(h.log_scale[fam] + power * jax.nn.log_sigmoid(h.logit_decay)[fam])
+
+
+def _solve(h: Hyper, stats, basis: Basis, active):
+    G, b, yy, n = stats
+    beta = jnp.exp(-h.log_noise)
+    sq = prior_sd(h, basis) * active  # inactive columns: zero prior variance
+    Gs = jnp.einsum("w,wij->ij", beta, G)
+    bs = jnp.einsum("w,wi->i", beta, b)
+    # whitened: A' = I + L^1/2 G L^1/2, mean = L^1/2 A'^-1 L^1/2 b
+    A = jnp.eye(sq.shape[0]) + sq[:, None] * Gs * sq[None, :]
+    chol = jnp.linalg.cholesky(A)
+    z = jax.scipy.linalg.cho_solve((chol, True), sq * bs)
+    mean = sq * z
+    logdet = 2.0 * jnp.sum(jnp.log(jnp.diag(chol)))
+    fit = jnp.sum(beta * yy) - jnp.dot(sq * bs, z)
+    log_ev = 0.5 * (jnp.sum(n * jnp.log(beta)) - fit - logdet - jnp.sum(n) * jnp.log(2.0 * jnp.pi))
+    return mean, chol, sq, log_ev
+
+
+def log_evidence(h: Hyper, stats, basis: Basis, active):
+    """log p(rows | hyperparameters, active columns), the marginal likelihood of the
+    linear-Gaussian model."""
+    return _solve(h, stats, basis, active)[3]
+
+
+def _initial(stats, decay: float) -> Hyper:
+    _, _, yy, n = stats
+    var = yy / jnp.maximum(n, 1.0)
+    return Hyper(jnp.zeros(3), jnp.full(3, jnp.log(decay / (1.0 - decay))), jnp.log(1e-2 * var + 1e-30))
+
+
+class Posterior(eqx.Module):
+    """The posterior of one DOF's scaled coefficients: `mean` (P,) and `covariance` (P, P),
+    averaged over the restoring degrees with their evidence weights; per degree K = 1..`degree`
+    the hyperparameters, the log evidence and the weight."""
+
+    mean: Float[Array, " p"]
+    covariance: Float[Array, "p p"]
+    hyper: Hyper
+    log_evidence: Float[Array, " degrees"]
+    weight: Float[Array, " degrees"]
+
+
+#: the optimum's derivative by the implicit function theorem; a least-squares solve where a
+#: hyperparameter does not move the evidence (a flat direction of its Hessian)
+_ADJOINT = optx.ImplicitAdjoint(linear_solver=lx.AutoLinearSolver(well_posed=False))
+
+
+def _optimise(stats, basis: Basis, active, max_steps: int):
+    def loss(h, args):
+        return -log_evidence(h, args, basis, active) / jnp.maximum(jnp.sum(args[3]), 1.0)
+
+    solver = optx.BFGS(rtol=1e-7, atol=1e-7)
+    sols = [optx.minimise(loss, solver, _initial(stats, decay), args=stats, max_steps=max_steps, throw=False,
+                          adjoint=_ADJOINT)
+            for decay in (0.3, 0.7)]  # two starts: the evidence can have a local optimum at either end
+    vals = [loss(sl.value, stats) for sl in sols]
+    better = vals[1] < vals[0]
+    h = jax.tree_util.tree_map(lambda a, b_: jnp.where(better, a, b_), sols[1].value, sols[0].value)
+    code = RESULTS.where(better, RESULTS.promote(sols[1].result), RESULTS.promote(sols[0].result))
+    mean, chol, sq, log_ev = _solve(h, stats, basis, active)
+    inv = jax.scipy.linalg.cho_solve((chol, True), jnp.eye(sq.shape[0]))
+    return h, mean, sq[:, None] * inv * sq[None, :], log_ev, code._value
+
+
+def posterior(stats, basis: Basis, *, max_steps: int = 1024, throw: bool = True) -> Solution:
+    """Posterior of the scaled coefficients from per-well statistics, averaged over the restoring
+    degree K = 1..`basis.degree` with weights p(K | rows) (uniform prior over K; each K with its
+    own evidence-optimal hyperparameters).
+
+    **Arguments:**
+
+    - `stats`: `(G, b, yy, n)` from `well_statistics` (wells on the leading axis).
+    - `basis`: the families' sizes.
+    - `max_steps`: BFGS steps on the negative log evidence.
+
+    **Returns:** a `Solution` with a `Posterior` value and a `RESULTS` code (the optimiser's).
+    Jittable, vmappable over datasets, differentiable (each optimum by the implicit function
+    theorem)."""
+    fam = basis.family()
+    order = np.concatenate([np.arange(n) for n in basis.sizes])
+    degrees = np.arange(1, basis.degree + 1)
+    active = jnp.asarray(np.stack([np.where(fam == 0, order <= k, True) for k in degrees]).astype(float))
+    h, means, covs, log_ev, codes = jax.vmap(lambda a: _optimise(stats, basis, a, max_steps))(active)
+    weight = jax.nn.softmax(jnp.where(jnp.isfinite(log_ev), log_ev, -jnp.inf))
+    mean = jnp.einsum("k,ki->i", weight, means)
+    dev = means - mean[None, :]
+    cov = jnp.einsum("k,kij->ij", weight, covs) + jnp.einsum("k,ki,kj->ij", weight, dev, dev)
+    best = jnp.argmax(weight)
+    code = RESULTS.where(jnp.all(jnp.isfinite(mean)), as_result(codes[best]), RESULTS.nonfinite)
+    out = Solution(Posterior(mean, cov, h, log_ev, weight), code, {})
+    if throw:
+        out = eqx.tree_at(lambda s: s.value, out, out.result.error_if(out.value, out.result != RESULTS.successful))
+    return out
+
+
+def to_monomials(basis: Basis, centre, half, speed, scale):
+    """Matrix M (Q, P) from the scaled coefficients to the model's monomial coefficients:
+    stiffness x^0..x^K, velocity damping sgn(v)|v|^0..d, position damping x^0..x^d v (the
+    viscous part of C(x) v added to the velocity damping's v, x^0 v left at 0)."""
+    k, d = basis.degree, basis.damping_order
+    cheb = np.zeros((k + 1, k + 1))  # [m, i]: coefficient of u^m in T_i(u)
+    for i in range(k + 1):
+        c = np.polynomial.chebyshev.cheb2poly(np.eye(k + 1)[i])
+        cheb[: c.shape[0], i] = c
+    cheb = jnp.asarray(cheb)
+    restoring = monomial_map(centre, half, k + 1) @ cheb * scale
+    velocity = jnp.diag(scale / speed ** jnp.arange(d + 1.0))
+    # u^j w, j = 1..d: (scale / V) sum_m S[m, j] x^m v
+    pos = monomial_map(centre, half, d + 1)[:, 1:] * scale / speed  # (d + 1, d)
+    q = (k + 1) + (d + 1) + (d + 1)
+    M = jnp.zeros((q, basis.n))
+    M = M.at[: k + 1, : k + 1].set(restoring)
+    M = M.at[k + 1: k + d + 2, k + 1: k + d + 2].set(velocity)
+    M = M.at[k + d + 3:, k + d + 2:].set(pos[1:])
+    if d >= 1:
+        M = M.at[k + 2, k + d + 2:].add(pos[0])  # x^0 v of C(x) v joins the viscous term
+    return M

@@ -1,0 +1,188 @@
+"""The reconstruction as one statistical model, stage by stage.
+
+1. Validate the recordings, settle masses and topology, fill missing signals (`_resolve`).
+2. Group each DOF's recordings into wells by their mean deformation (`_wells`).
+3. Per DOF, weak-form rows of the force balance on every record (`_bayes.weak_rows`).
+4. Per DOF, the evidence-optimal posterior of the global law (`_bayes.posterior`).
+5. The posterior mapped to the model's monomial coefficients: the law, its standard errors and
+   its band from one covariance.
+6. Diagnostics that read the final posterior (warnings); they change nothing.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._coordination import _bayes
+from .._custom_types import Array, Bool, Float, Int
+from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING
+from .._model._model import GlobalModel
+from .._recordings._derivatives import band_edge
+from .._solution import RESULTS
+from . import _sanity
+
+
+class ReconstructSettings(eqx.Module):
+    """Every option of the reconstruction.
+
+    **Arguments:**
+
+    - `degree`: highest Chebyshev order K of the restoring law (the prior's decay, chosen by
+      evidence, decides how much of it the data use).
+    - `damping_order`: highest power d of both damping families.
+    - `well_tol`: recordings whose mean deformation differs by less than this fraction of the
+      DOF's spread of means are one well.
+    - `width`: samples per test-function window; None: one period of the record's band edge
+      (the frequency below which 99.5 % of the response's power lies above the noise floor).
+    """
+
+    degree: int = eqx.field(static=True, default=13)
+    damping_order: int = eqx.field(static=True, default=3)
+    well_tol: float = eqx.field(static=True, default=0.1)
+    width: int | None = eqx.field(static=True, default=None)
+
+
+def _dof_arrays(recs, i: int, masses, topology):
+    """Per record of DOF `i`: x, v, the pointwise target p and the displacement s whose second
+    derivative completes it (y = p + s''), padded to one length with a mask."""
+    xs, vs, ps, ss = [], [], [], []
+    for r in recs:
+        b, f = r.inputs()
+        if r.a is not None and "a" not in r.derived:
+            p = topology.carried(f - r.a * masses[None, :])[:, i]
+            s = np.zeros(r.n_samples)
+        else:  # a = (mass displacement)'' + base_acc: the second derivative goes to the test function
+            p = topology.carried(f - b[:, None] * masses[None, :])[:, i]
+            s = topology.carried(-topology.displacements(r.x) * masses[None, :])[:, i]
+        xs.append(r.x[:, i]), vs.append(r.v[:, i]), ps.append(p), ss.append(s)
+    n = max(len(a) for a in xs)
+    pad = lambda arrs: np.stack([np.pad(a, (0, n - len(a))) for a in arrs])  # noqa: E731
+    mask = np.stack([np.arange(n) < len(a) for a in xs])
+    return pad(xs), pad(vs), pad(ps), pad(ss), mask
+
+
+def _width(recs, i: int, settings: ReconstructSettings) -> int:
+    if settings.width is not None:
+        return int(settings.width)
+    edge = min(band_edge(r.x[:, i], r.dt) for r in recs)
+    n = min(r.n_samples for r in recs)
+    return int(np.clip(round(1.0 / (max(edge, 1e-12) * recs[0].dt)), 9, max(9, n // 16)))
+
+
+def reconstruct_arrays(
+    x: Float[Array, "records samples"],
+    v: Float[Array, "records samples"],
+    p: Float[Array, "records samples"],
+    s: Float[Array, "records samples"],
+    mask: Bool[Array, "records samples"],
+    well: Int[Array, " records"],
+    *,
+    n_wells: int,
+    width: int,
+    dt: float,
+    settings: ReconstructSettings = ReconstructSettings(),
+    throw: bool = True,
+):
+    """The reconstruction of one DOF as a pure function of arrays: weak-form rows, the
+    evidence-optimal posterior, and its map to the model's monomial coefficients.
+
+    The force balance y = p + s'' = F(x) + B(v) + C(x) v (see `reconstruct`); for a measured
+    absolute acceleration a, p = force - m a and s = 0; where a is not measured, p = force -
+    m base_acc and s = -m x (chains: both carried, `AbstractTopology.carried`).
+
+    **Arguments:**
+
+    - `x`, `v`, `p`, `s`, `mask`: (records, samples), records padded to one length, `mask`
+      False on the padding.
+    - `well`: (records,) the well index of each record, 0..`n_wells` - 1.
+    - `n_wells`, `width` (samples per test-function window), `settings`: static.
+    - `dt`: the sampling interval.
+
+    **Returns:** `(coef, covariance, solution)`: the monomial coefficients (Q,) in the order
+    stiffness x^0..x^K, velocity damping sgn(v)|v|^0..d, position damping x^0..x^d v; their
+    covariance (Q, Q); the scaled posterior's `Solution` (its `result` a `RESULTS` code).
+    Jittable, vmappable over datasets, differentiable in both modes with respect to the data."""
+    basis = _bayes.Basis(settings.degree, settings.damping_order)
+    m = mask.astype(x.dtype)
+    lo = jnp.min(jnp.where(mask, x, jnp.inf))
+    hi = jnp.max(jnp.where(mask, x, -jnp.inf))
+    centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    speed = jnp.max(jnp.abs(v) * m)
+    rows, target, valid = _bayes.weak_rows(x, v, p, s, mask, centre, half, speed, basis, width, dt)
+    scale = jnp.sqrt(jnp.sum(valid * target**2) / jnp.maximum(jnp.sum(valid), 1.0))
+    stats = _bayes.well_statistics(rows, target / scale, valid, well, n_wells)
+    sol = _bayes.posterior(stats, basis, throw=throw)
+    M = _bayes.to_monomials(basis, centre, half, speed, scale)
+    post = sol.value
+    return M @ post.mean, M @ post.covariance @ M.T, sol
+
+
+def estimate(recs, masses, topology, settings: ReconstructSettings, wells, say, failure):
+    """Stages 3-5 for every DOF of completed recordings. Returns the model's blocks, per-DOF
+    covariances and per-DOF stats."""
+    d = recs[0].n_dof
+    k, dd = settings.degree, settings.damping_order
+    blocks, covs, stats = [], [], []
+    for i in range(d):
+        _, labels, groups = wells[i]
+        say(f"{f'DOF {i} ({i + 1}/{d}): ' if d > 1 else ''}posterior of the global law")
+        width = _width(recs, i, settings)
+        x, v, p, s, mask = _dof_arrays(recs, i, masses, topology)
+        coef, cov, sol = _fit(jnp.asarray(x), jnp.asarray(v), jnp.asarray(p), jnp.asarray(s), jnp.asarray(mask),
+                              jnp.asarray(labels), len(groups), settings, width, recs[0].dt)
+        if sol.result != RESULTS.successful:
+            failure.note(sol.result, f"DOF {i}: evidence maximisation")
+        coef, cov = np.asarray(coef), np.asarray(cov)
+        blocks.append((coef[: k + 1], coef[k + 1: k + dd + 2], coef[k + dd + 2:]))
+        covs.append(cov)
+        h = sol.value.hyper
+        post = sol.value
+        sd = np.sqrt(np.clip(np.diag(np.asarray(post.covariance)), 0, None))
+        stats.append({
+            "coordination": "evidence",
+            "width": width,
+            "degree_weight": np.asarray(post.weight).tolist(),
+            "degree": int(np.argmax(np.asarray(post.weight))) + 1,
+            "prior_scale": np.exp(np.asarray(h.log_scale)).tolist(),
+            "prior_decay": np.asarray(jax.nn.sigmoid(h.logit_decay)).tolist(),
+            "noise_sd": np.exp(0.5 * np.asarray(h.log_noise)).tolist(),
+            "resolution": (np.abs(np.asarray(post.mean)) / np.maximum(sd, 1e-300)).tolist(),
+        })
+    return blocks, covs, stats
+
+
+@eqx.filter_jit
+def _fit(x, v, p, s, mask, well, n_wells, settings, width, dt):
+    return reconstruct_arrays(x, v, p, s, mask, well, n_wells=n_wells, width=width, dt=dt, settings=settings,
+                              throw=False)
+
+
+def model_from(masses, topology, blocks, covs) -> GlobalModel:
+    """The `GlobalModel` whose standard errors and covariance are the posterior's."""
+    stiff, vel, pos = (np.stack([b[j] for b in blocks]) for j in range(3))
+    cov = np.stack(covs)
+    se = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None))
+    k, dv = stiff.shape[1], vel.shape[1]
+    stderr = {STIFFNESS: jnp.asarray(se[:, :k]), VELOCITY_DAMPING: jnp.asarray(se[:, k: k + dv]),
+              POSITION_DAMPING: jnp.asarray(se[:, k + dv:])}
+    return GlobalModel(masses=jnp.asarray(masses), stiffness=jnp.asarray(stiff), velocity_damping=jnp.asarray(vel),
+                       position_damping=jnp.asarray(pos), topology=topology, stderr=stderr,
+                       covariance=jnp.asarray(cov))
+
+
+
+def diagnose(recs, wells, model: GlobalModel, training: dict) -> list[str]:
+    """Stage 6: warnings that read the data and the final model (they change nothing)."""
+    found = []
+    names = [r.name for r in recs]
+    for i, (_, labels, groups) in enumerate(wells):
+        xcol = [r.x[:, i] for r in recs]
+        eq = np.array([np.mean([xcol[k].mean() for k in g]) for g in groups])
+        stiff = np.asarray(model.stiffness[i])
+        slope = np.polynomial.polynomial.polyval(eq, np.polynomial.polynomial.polyder(stiff))
+        swing, swung = _sanity.check_swings(i, names, xcol, labels, eq, slope)
+        found += swing + _sanity.check_amplitude(i, names, xcol, labels, eq, skip=swung)
+        amps = [max(_sanity.vibration_amplitude(xcol[k]) for k in grp) for grp in groups]
+        found += _sanity.check_global_shape(i, stiff, eq, amps, slope)
+    return found + _sanity.check_fit_quality(training)
