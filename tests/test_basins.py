@@ -1,3 +1,4 @@
+import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -291,7 +292,9 @@ def test_lanes_match_member_and_a_tight_reference_with_per_point_steps():
 @pytest.mark.parametrize("topology", ["chain", "independent"])
 @pytest.mark.parametrize("load", ["tip", "base"])
 def test_lane_field_matches_the_model_equations(topology, load):
-    from gmr_jax._basins._lanes import lane_field
+    """The lanes' field (lanes on the last axis, one model or each lane its own) is the model's
+    equations of motion lane by lane."""
+    from gmr_jax._basins._lanes import lanes_field
 
     terms = [{"dof": i, "physics": p, "order": o, "coefficient": c}
              for i in range(3) for p, o, c in (("stiffness", 1, -20.0 - i), ("stiffness", 3, 3e4), ("stiffness", 2, 7.0),
@@ -302,12 +305,25 @@ def test_lane_field_matches_the_model_equations(topology, load):
     x, v = jnp.asarray(rng.normal(0, 0.03, (3, 16))), jnp.asarray(rng.normal(0, 0.5, (3, 16)))
     t, f, a = (jnp.asarray(rng.uniform(0.01, 0.3, 16)), jnp.asarray(rng.uniform(0.5, 3, 16)),
                jnp.asarray(rng.uniform(0.1, 2, 16)))
-    got = lane_field(m, load, 3, jnp.float64)(t, x, v, f, a, 0.5 / f)
     src = HalfSineTip if load == "tip" else HalfSineBase
-    want = jax.vmap(lambda xi, vi, ti, fi, ai: m.accelerations(xi, vi, *src(fi, ai, n_dof=3)(ti)), in_axes=(1, 1, 0, 0, 0),
-                    out_axes=1)(x, v, t, f, a)
-    np.testing.assert_allclose(np.asarray(got[3:]), np.asarray(want), rtol=1e-12, atol=1e-9)
-    np.testing.assert_array_equal(np.asarray(got[:3]), np.asarray(v))
+
+    def want(model):
+        return jax.vmap(lambda xi, vi, ti, fi, ai: model.accelerations(xi, vi, *src(fi, ai, n_dof=3)(ti)),
+                        in_axes=(1, 1, 0, 0, 0), out_axes=1)(x, v, t, f, a)
+
+    with jax.numpy_rank_promotion("allow"):
+        got = lanes_field(m, load, 3, per_lane=False)(t, (x, v), (m, f, a, 0.5 / f))
+    np.testing.assert_allclose(np.asarray(got[1]), np.asarray(want(m)), rtol=1e-12, atol=1e-9)
+    np.testing.assert_array_equal(np.asarray(got[0]), np.asarray(v))
+    # each lane its own coefficients (a drawn ensemble): lane k follows model k
+    scale = jnp.asarray(rng.uniform(0.8, 1.2, 16))
+    models = jax.vmap(lambda s: eqx.tree_at(lambda q: (q.stiffness, q.masses), m, (m.stiffness * s, m.masses * s)))(scale)
+    lanes = jax.tree.map(lambda q: jnp.moveaxis(q, 0, -1), models)
+    with jax.numpy_rank_promotion("allow"):
+        got = lanes_field(m, load, 3, per_lane=True)(t, (x, v), (lanes, f, a, 0.5 / f))
+    for k in (0, 7, 15):
+        mk = jax.tree.map(lambda q: q[k], models)
+        np.testing.assert_allclose(np.asarray(got[1][:, k]), np.asarray(want(mk))[:, k], rtol=1e-12, atol=1e-9)
 
 
 def test_lane_half_period_sin_is_sin_on_the_load_phase():
@@ -347,17 +363,38 @@ def test_lanes_step_budget_is_per_point(batching):
 
 
 @pytest.mark.parametrize("batching", ["lanes", "native"])
-@pytest.mark.parametrize("solver", ["dopri5", "dopri8"])
+@pytest.mark.parametrize("solver", [dfx.Dopri5(), dfx.Dopri8(), "dopri8"])
 def test_lanes_other_pairs_give_the_same_map(solver, batching):
     if batching == "native":
         _needs_compiler()
     m = chain()
     wells = stable_wells(m, [[-0.05, 0.05]] * 2)
     f, A = _grid()
-    ref = basin_map(m, f, A, wells, settings=SweepSettings(batching="lanes")).value
+    ref = basin_map(m, f, A, wells, settings=SweepSettings(batching=batching)).value
     other = basin_map(m, f, A, wells, settings=SweepSettings(solver=solver, batching=batching)).value
     assert np.array_equal(np.asarray(other.config), np.asarray(ref.config))
     np.testing.assert_allclose(np.asarray(other.x_final), np.asarray(ref.x_final), atol=2e-4)
+
+
+def test_default_sweep_runs_the_diffrax_solver_it_is_given():
+    """The default path integrates with the diffrax solver object of `SweepSettings.solver`:
+    Dopri8 instead of Tsit5 takes fewer steps per point (an 8th-order pair) and gives the same
+    map; an implicit solver (Kvaerno5, vmapped lane by lane) gives it too."""
+    m = chain()
+    wells = stable_wells(m, [[-0.05, 0.05]] * 2)
+    f, A = _grid()
+    tsit = basin_map(m, f, A, wells)
+    assert tsit.stats["batching"] == "lanes" and tsit.stats["solver"] == "Tsit5"
+    dop8 = basin_map(m, f, A, wells, settings=SweepSettings(solver=dfx.Dopri8()))
+    assert dop8.stats["solver"] == "Dopri8"
+    np.testing.assert_array_equal(np.asarray(dop8.value.config), np.asarray(tsit.value.config))
+    s_t, s_8 = np.asarray(tsit.value.steps, float), np.asarray(dop8.value.steps, float)
+    assert s_8.mean() < 0.8 * s_t.mean()
+    assert np.mean(s_8 < s_t) > 0.9  # point by point, not only on average
+    kv = basin_map(m, f[::2], A[::2], wells, settings=SweepSettings(solver=dfx.Kvaerno5()))
+    np.testing.assert_array_equal(np.asarray(kv.value.config), np.asarray(tsit.value.config)[::2, ::2])
+    with pytest.raises(g.GMRInputError, match="adaptive diffrax solver"):
+        SweepSettings(solver=dfx.Euler())
 
 
 def test_float32_sweep_agrees_with_float64():
@@ -366,7 +403,7 @@ def test_float32_sweep_agrees_with_float64():
     f, A = _grid()
     ref = basin_map(m, f, A, wells).value
     lo_sol = basin_map(m, f, A, wells, settings=SweepSettings(precision="float32"))
-    assert lo_sol.stats["batching"] == "lanes"  # "auto": the native kernel is float64 only
+    assert lo_sol.stats["batching"] == "lanes"
     lo = lo_sol.value
     assert lo.x_final.dtype == jnp.float32
     assert np.array_equal(np.asarray(lo.config), np.asarray(ref.config))
@@ -404,8 +441,10 @@ def test_coulomb_friction_is_smoothed_below_the_settled_speed_and_said(batching)
     span = float(np.min(np.nanmax(wells, 1) - np.nanmin(wells, 1)))
     assert auto.stats["sign_eps"] == pytest.approx(0.1 * 0.05 * span)
     assert auto.stats["counts"] == {"successful": 20}
-    finer = basin_map(m, f, A, wells, settings=SweepSettings(batching=batching,
-                                                             sign_eps=auto.stats["sign_eps"] / 10))
+    # ten times smaller eps: ten times stiffer near v = 0, about 1e5 steps a point (budget raised)
+    finer = basin_map(m, f, A, wells, settings=SweepSettings(
+        batching=batching, sign_eps=auto.stats["sign_eps"] / 10,
+        integrator=g.Integrator(rtol=1e-6, atol=1e-8, max_steps=400_000)))
     np.testing.assert_array_equal(np.asarray(auto.value.config), np.asarray(finer.value.config))
     assert len(set(np.asarray(auto.value.config).ravel().tolist())) >= 2
     # a model without sgn(v) is not touched

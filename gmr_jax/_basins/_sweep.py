@@ -1,10 +1,9 @@
-"""Deployment-basin sweeps over actuation grids (paper Fig. 11, load of Eq. 25): on a CPU the
-model's own C kernel (`_native`), else vectorised XLA loops or chunked diffrax solves sharded
-over all devices; every point's result code kept."""
+"""Deployment-basin sweeps over actuation grids (paper Fig. 11, load of Eq. 25): a queue of
+points driven through diffrax's solvers in lanes (`_lanes`) and sharded over all devices, or
+opt-in the model's own C kernel (`_native`); every point's result code kept."""
 
 import dataclasses
 import functools
-import warnings
 from collections.abc import Callable
 
 import diffrax as dfx
@@ -25,7 +24,7 @@ from .._simulate._simulate import has_coulomb
 from .._solution import RESULTS, Solution, as_result, code_name, raise_if_failed, value_of
 from . import _native
 from ._joint import joint_final_states
-from ._lanes import SOLVERS as LANE_SOLVERS, lanes_final_states
+from ._lanes import SOLVERS as LANE_SOLVERS, as_solver, lanes_final_states, solver_name
 
 LOADS = ("tip", "base")
 BATCHINGS = ("auto", "native", "lanes", "joint", "member")
@@ -46,21 +45,27 @@ class SweepSettings(eqx.Module):
       span of each cell's wells) is stopped there and flagged `diverged`.
     - `load`: "tip" (default, Eq. 25: force A sin(2πft) on the last mass for t <= 1/(2f)) or
       "base" (the same half-sine as base acceleration, A in m/s²).
-    - `batching`: "auto" (default): "native" where it applies (a CPU, a `GlobalModel` on a chain
-      or independent DOFs, float64, a C compiler found, one process), else "lanes".
-      "native": the lanes algorithm as a C kernel generated from the model and built with the
-      system's C compiler (`_native`: every stage and the step decision of 16 points at a time
-      in vector registers, all CPU cores through one shared queue; `chunk` and `devices` do not
-      apply); "lanes": per-point step control inside one vectorised XLA loop (`_lanes`):
-      `chunk` lanes step together, each point with its own time, step size and accept/reject
-      decision, and a lane whose point is done takes the next point of the queue (the step
-      count per point is a scalar solver's; no member waits for the slowest); "joint": each
+    - `batching`: "lanes" (default; "auto" is the same): diffrax's `solver.step` and
+      `PIDController` vmapped over `chunk` lanes inside one loop (`_lanes`), each point with its
+      own time, step size, controller state and accept/reject decision, and a lane whose point
+      is done takes the next point of the queue (the step count per point is one
+      `diffeqsolve`'s; no member waits for the slowest); runs on every device, under `jax.jit`.
+      "native" (opt-in, a CPU accelerator): the same queue as a C kernel generated from the
+      model and built with the system's C compiler (`_native`: every stage and the step decision
+      of 16 points at a time in vector registers, all CPU cores through one shared queue, an
+      integral controller of its own; `chunk` and `devices` do not apply). It needs a C compiler
+      (`$CC`, cc, gcc or clang), a `GlobalModel` on a chain or independent DOFs, float64, one
+      process and an explicit pair (Tsit5, Dopri5, Dopri8); measured about 3-4x faster than
+      "lanes" on a CPU (`results/basins_diffrax.md`). "joint": each
       chunk integrated as one ODE with one step size and a max-over-members error norm (every
       member meets the tolerance; see `_joint`), a chunk whose joint solve fails re-run member
       by member; "member": `vmap` of one `diffeqsolve` per point (lockstep: a chunk runs as long
       as its slowest member).
-    - `solver` ("lanes" only): the embedded Runge-Kutta pair, "tsit5" (default), "dopri5" or
-      "dopri8" (diffrax's tableaus); "joint" and "member" use the integrator's Tsit5.
+    - `solver` ("lanes", "native"): the diffrax solver each point is integrated with, as in
+      `diffeqsolve`: `diffrax.Tsit5()` (default), `Dopri5()`, `Dopri8()`, an implicit one such
+      as `Kvaerno5()` for a stiff chain (any adaptive diffrax ODE solver under "lanes"; "native"
+      runs the explicit pairs Tsit5, Dopri5, Dopri8); the names "tsit5", "dopri5", "dopri8" are
+      accepted. "joint" and "member" use the integrator's Tsit5.
     - `attempts_per_pass` ("lanes" only): step attempts per pass of the loop; finished points
       are collected and lanes refilled once per pass (measured on 2 CPU cores: 4 is about 5-10 %
       faster than 1; compile time grows with it).
@@ -82,8 +87,8 @@ class SweepSettings(eqx.Module):
     v_tol: float = 0.05
     box_spans: float = 20.0
     load: str = eqx.field(static=True, default="tip")
-    batching: str = eqx.field(static=True, default="auto")
-    solver: str = eqx.field(static=True, default="tsit5")
+    batching: str = eqx.field(static=True, default="lanes")
+    solver: dfx.AbstractSolver = dfx.Tsit5()
     attempts_per_pass: int = eqx.field(static=True, default=4)
     precision: str = eqx.field(static=True, default="float64")
     sign_eps: float | None = eqx.field(static=True, default=None)
@@ -100,8 +105,13 @@ class SweepSettings(eqx.Module):
         if not isinstance(self.attempts_per_pass, int) or self.attempts_per_pass < 1:
             raise GMRInputError(f"SweepSettings.attempts_per_pass must be an integer >= 1, got "
                                 f"{describe(self.attempts_per_pass)}")
-        if not isinstance(self.solver, str) or self.solver not in SOLVERS:
-            raise GMRInputError(f"SweepSettings.solver must be one of {SOLVERS}, got {describe(self.solver)}")
+        if isinstance(self.solver, str) and self.solver not in SOLVERS:
+            raise GMRInputError(f"SweepSettings.solver must be one of {SOLVERS} or a diffrax solver (e.g. "
+                                f"diffrax.Tsit5()), got {describe(self.solver)}")
+        if not isinstance(self.solver, (str, dfx.AbstractAdaptiveSolver)):
+            raise GMRInputError(f"SweepSettings.solver must be an adaptive diffrax solver with an error estimate "
+                                f"(diffrax.Tsit5(), Dopri5(), Dopri8(), Kvaerno5(), ...), got "
+                                f"{type(self.solver).__name__}")
         check_real(self.settle_time, "SweepSettings.settle_time", lo=0.0, lo_open=True,
                    fix="give the free time after the actuation in seconds, > 0 (e.g. 10.0)")
         check_real(self.x_tol, "SweepSettings.x_tol", lo=0.0, lo_open=True,
@@ -173,9 +183,10 @@ def classify(x1, v1, code, wells, span, settings: SweepSettings):
 
 
 def _geometry(wells):
-    span = jnp.nanmax(wells, axis=1) - jnp.nanmin(wells, axis=1)
+    """Span and centre of each cell's wells ((..., dof, max_wells) -> (..., dof))."""
+    span = jnp.nanmax(wells, axis=-1) - jnp.nanmin(wells, axis=-1)
     span = jnp.where(span > 0, span, 1.0)
-    centre = 0.5 * (jnp.nanmax(wells, axis=1) + jnp.nanmin(wells, axis=1))
+    centre = 0.5 * (jnp.nanmax(wells, axis=-1) + jnp.nanmin(wells, axis=-1))
     return span, centre
 
 
@@ -195,19 +206,25 @@ def _chunk(model, settings, x0, wells, fs, amps):
     return idx, config, code, x1, v1, steps
 
 
-def _lanes(model, settings, x0, wells, fs, amps, lanes: int):
-    """Every point of this call through `lanes` lanes with per-point step control (`_lanes`)."""
-    span, centre = _geometry(wells)
-    x1, v1, code, steps = lanes_final_states(model, settings, x0, fs, amps, centre, span, lanes, settings.solver,
-                                             settings.attempts_per_pass)
-    idx, config, code = _classify_all(x1, v1, code, wells, span, settings)
+def _lanes(models, settings, x0s, wells, fs, amps, mids, lanes: int, ensemble: bool):
+    """Every point of this call through `lanes` lanes with per-point step control (`_lanes`);
+    `wells`, `x0s` (M, ...) per model, point k of model `mids[k]` when `ensemble`."""
+    span, centre = _geometry(wells)  # (M, dof)
+    lo, hi = centre - settings.box_spans * span, centre + settings.box_spans * span
+    x1, v1, code, steps = lanes_final_states(models, settings, as_solver(settings.solver), x0s, fs, amps,
+                                             mids if ensemble else None, lo, hi, lanes, settings.attempts_per_pass)
+    if ensemble:
+        idx, config, code = jax.vmap(lambda x, v, c, m: classify(x, v, c, wells[m], span[m], settings))(
+            x1, v1, code, mids)
+    else:
+        idx, config, code = _classify_all(x1, v1, code, wells[0], span[0], settings)
     return idx, config, code, x1, v1, steps
 
 
-def _chunks(model, settings, x0, wells, fs, amps, chunk: int):
+def _chunks(model, settings, x0s, wells, fs, amps, mids, chunk: int, ensemble: bool = False):
     if settings.batching == "lanes":
-        return _lanes(model, settings, x0, wells, fs, amps, chunk)
-    out = jax.lax.map(lambda p: _chunk(model, settings, x0, wells, p[0], p[1]),
+        return _lanes(model, settings, x0s, wells, fs, amps, mids, chunk, ensemble)
+    out = jax.lax.map(lambda p: _chunk(model, settings, x0s[0], wells[0], p[0], p[1]),
                       (fs.reshape(-1, chunk), amps.reshape(-1, chunk)))
     return jax.tree.map(lambda o: o.reshape(-1, *o.shape[2:]), out)
 
@@ -216,18 +233,18 @@ _sweep_points = eqx.filter_jit(_chunks)
 
 
 @functools.lru_cache(maxsize=32)
-def _sharded(devices: tuple, chunk: int):
+def _sharded(devices: tuple, chunk: int, ensemble: bool = False):
     """The points split over `devices` with shard_map; built once per (devices, chunk) so that
     later calls hit the jit cache."""
     mesh = Mesh(np.asarray(devices), ("grid",))
 
     @eqx.filter_jit
-    def run(model, settings, x0, wells, fs, amps):
-        def local(fs, amps):
-            return _chunks(model, settings, x0, wells, fs, amps, chunk)
+    def run(model, settings, x0s, wells, fs, amps, mids):
+        def local(fs, amps, mids):
+            return _chunks(model, settings, x0s, wells, fs, amps, mids, chunk, ensemble)
 
-        return jax.shard_map(local, mesh=mesh, in_specs=(P("grid"), P("grid")), out_specs=P("grid"),
-                             check_vma=False)(fs, amps)
+        return jax.shard_map(local, mesh=mesh, in_specs=(P("grid"), P("grid"), P("grid")), out_specs=P("grid"),
+                             check_vma=False)(fs, amps, mids)
 
     return run
 
@@ -250,14 +267,15 @@ def friction_smoothing(model, settings: SweepSettings, wells) -> tuple:
 
 
 def resolve_batching(model, settings: SweepSettings, devices) -> str:
-    """The batching a sweep runs with: "auto" resolved (`SweepSettings.batching`); "native" asked
-    for where it cannot run is a `GMRInputError` naming why and the fix."""
-    if settings.batching not in ("auto", "native"):
-        return settings.batching
+    """The batching a sweep runs with ("auto" is "lanes"); "native" asked for where it cannot run
+    is a `GMRInputError` naming why and the fix."""
+    if settings.batching != "native":
+        return "lanes" if settings.batching == "auto" else settings.batching
     why = None
     if not _native.supports(model, settings):
-        why = (f"the native kernel integrates a GlobalModel on a chain or independent DOFs in float64 "
-               f"(got {type(model).__name__}, precision {settings.precision})")
+        why = (f"the native kernel integrates a GlobalModel on a chain or independent DOFs in float64 with "
+               f"Tsit5, Dopri5 or Dopri8 (got {type(model).__name__}, precision {settings.precision}, solver "
+               f"{type(as_solver(settings.solver)).__name__})")
     elif _native.compiler() is None:
         why = "GMR_NATIVE turns it off" if _native.disabled() else "no C compiler was found ($CC, cc, gcc, clang)"
     elif jax.process_count() > 1:
@@ -270,12 +288,7 @@ def resolve_batching(model, settings: SweepSettings, devices) -> str:
             return "native"
         except (RuntimeError, OSError) as err:
             why = f"the C kernel did not build: {str(err)[-600:]}"
-            if settings.batching == "auto":
-                warnings.warn(f"basin_map: {why}; the sweep runs with batching='lanes' (GMR_NATIVE=0 skips "
-                              f"the native kernel)", RuntimeWarning, stacklevel=3)
-    if settings.batching == "native":
-        raise GMRInputError(f"batching='native' cannot run here: {why}; use SweepSettings(batching='lanes')")
-    return "lanes"
+    raise GMRInputError(f"batching='native' cannot run here: {why}; use SweepSettings(batching='lanes')")
 
 
 LANES_CPU = 128  # lanes per CPU device ("lanes"; 2 cores, 3 cells: 64-256 within noise, 512 1.7x slower)
@@ -292,9 +305,15 @@ def default_chunk(n_dof: int, batching: str = "joint", accelerator: bool = False
 
 
 def _traced(settings: SweepSettings) -> SweepSettings:
-    """Every float setting as an array: new tolerances or settle times do not recompile."""
+    """Every float setting as an array: new tolerances or settle times do not recompile (the
+    solver is left as it is)."""
     dtype = PRECISIONS[settings.precision]
-    return jax.tree.map(lambda v: jnp.asarray(v, dtype), settings)
+    arr = lambda v: None if v is None else jnp.asarray(v, dtype)  # noqa: E731
+    integ = settings.integrator
+    return dataclasses.replace(
+        settings, settle_time=arr(settings.settle_time), x_tol=arr(settings.x_tol), v_tol=arr(settings.v_tol),
+        box_spans=arr(settings.box_spans),
+        integrator=dataclasses.replace(integ, rtol=arr(integ.rtol), atol=arr(integ.atol), dt0=arr(integ.dt0)))
 
 
 def _cast(tree, dtype):
@@ -375,7 +394,8 @@ def basin_map(
     `BasinMap.result`. The Solution's `result` is `successful` unless the integrator failed on
     some point (then the first such code); a point that `diverged` (left the divergence box) or
     was `not_settled` is an outcome of the model, counted in `stats["counts"]` (points per
-    code name). `stats["batching"]` is the path that ran ("native", "lanes", ...) and
+    code name). `stats["batching"]` is the path that ran ("lanes", "native", ...),
+    `stats["solver"]` the diffrax solver's name (e.g. "Tsit5") and
     `stats["sign_eps"]` the smoothing of a Coulomb term (None: the model has none).
 
     Compiled shapes depend only on the number of points, `chunk`, the devices and the model's
@@ -399,18 +419,33 @@ def basin_map(
     flat_f, flat_a = ff.ravel(), aa.ravel()
     order = np.lexsort((flat_a, flat_f))  # by f, then A: similar actuations share a chunk
     n = flat_f.size
+    solver = type(as_solver(settings.solver)).__name__ if batching in ("lanes", "native") else "Tsit5"
     if batching == "native":
         cat = _native_sweep(model, settings, settings_t, x0, wells, flat_f[order], flat_a[order], progress, n_threads)
         first = np.empty(n, int)
         first[order] = np.arange(n)
         return _finish(cat, first, f_np, a_np, x0.shape[0], {"chunk": _native.LANES, "devices": 1,
                                                               "threads": n_threads or _native.threads(),
-                                                              "sign_eps": sign_eps},
+                                                              "sign_eps": sign_eps, "solver": solver},
                        batching, throw)
+    cat, extra = _run_points(model, False, settings, settings_t, x0[None], wells[None], flat_f[order], flat_a[order],
+                             None, chunk, devices, progress)
+    first = np.empty(n, int)
+    first[order] = np.arange(n)
+    return _finish(cat, first, f_np, a_np, x0.shape[0], {**extra, "sign_eps": sign_eps, "solver": solver}, batching,
+                   throw)
+
+
+def _run_points(model, ensemble, settings, settings_t, x0s, wells, fs, amps, mids, chunk, devices, progress):
+    """(idx, config, code, x1, v1, steps) of the points (fs, amps[, mids]) in the order given,
+    sharded over `devices` in up to 20 calls of one compiled function when `progress` is given,
+    and the stats (chunk, devices)."""
+    n = fs.size
+    dtype = PRECISIONS[settings.precision]
     nd = len(devices)
     if chunk is None:
         accelerator = devices[0].platform != "cpu"
-        chunk = default_chunk(model.n_dof, settings.batching, accelerator)
+        chunk = default_chunk(int(x0s.shape[1]), settings.batching, accelerator)
     chunk = int(chunk)
     if chunk < 1:
         raise GMRInputError(f"chunk must be >= 1, got {chunk}")
@@ -420,22 +455,24 @@ def basin_map(
     k = -(-per_dev // calls)  # chunks per device per call
     calls = -(-per_dev // k)
     total = calls * k * nd * chunk
-    pad = np.concatenate([order, np.full(total - n, order[-1])])
-    # call c, device j, slot i holds sorted chunk (c * k + i) * nd + j: devices take turns
+    pad = np.concatenate([np.arange(n), np.full(total - n, n - 1)])
+    # call c, device j, slot i holds chunk (c * k + i) * nd + j: devices take turns
     layout = pad.reshape(calls, k, nd, chunk).transpose(0, 2, 1, 3).reshape(calls, -1)
-    run = None if nd == 1 else _sharded(devices, chunk)
+    run = None if nd == 1 else _sharded(devices, chunk, ensemble)
     multi = jax.process_count() > 1 and run is not None
     if multi:  # host values, identical in every process, are what a multi-process jit takes
-        model, settings_t, x0, wells = jax.tree.map(
-            lambda a: np.asarray(a) if eqx.is_array(a) else a, (model, settings_t, x0, wells))
+        model, settings_t, x0s, wells = jax.tree.map(
+            lambda a: np.asarray(a) if eqx.is_array(a) else a, (model, settings_t, x0s, wells))
+    mids = np.zeros(n, np.int32) if mids is None else np.asarray(mids, np.int32)
     parts = []
     for c in range(calls):
-        fs, amps = flat_f[layout[c]].astype(dtype), flat_a[layout[c]].astype(dtype)  # NumPy: the same
-        # global input in every process
+        # NumPy: the same global input in every process
+        f_c, a_c, m_c = fs[layout[c]].astype(dtype), amps[layout[c]].astype(dtype), mids[layout[c]]
         if run is None:
-            out = _sweep_points(model, settings_t, x0, wells, jnp.asarray(fs), jnp.asarray(amps), chunk)
+            out = _sweep_points(model, settings_t, x0s, wells, jnp.asarray(f_c), jnp.asarray(a_c), jnp.asarray(m_c),
+                                chunk, ensemble)
         else:
-            out = run(model, settings_t, x0, wells, fs, amps)
+            out = run(model, settings_t, x0s, wells, f_c, a_c, m_c)
         if multi:  # every process gets the whole map (jax.distributed)
             from jax.experimental import multihost_utils
 
@@ -447,8 +484,7 @@ def basin_map(
     src = layout.ravel()
     first = np.full(n, -1)
     first[src[::-1]] = np.arange(src.size)[::-1]  # first slot holding each point
-    return _finish(cat, first, f_np, a_np, x0.shape[0], {"chunk": chunk, "devices": nd, "sign_eps": sign_eps},
-                   batching, throw)
+    return [o[first] for o in cat], {"chunk": chunk, "devices": nd}
 
 
 def _native_sweep(model, settings, settings_t, x0, wells, fs, amps, progress, n_threads=None):
