@@ -570,3 +570,33 @@ def test_cli_basins_notes_crossings_faster_than_the_recorded_speeds(tmp_path):
         if noted:
             assert "at least 0.707" in note and "14.1 x the fastest recorded (0.05" in note
     assert json.loads(path.read_text()).get("speed_range") is None
+
+
+def test_basin_probability_sweeps_the_drawn_models_as_one_batch_with_the_loops_answer():
+    """The drawn models are data in one lanes sweep: each (model, point) pair ends as that model's
+    own `basin_map` does point by point, so the probabilities are those of the per-draw loop."""
+    terms = []
+    for i, (k1, k3) in enumerate([(-30.0, 1e5), (-60.0, 2e5)]):
+        terms += [{"dof": i, "physics": "stiffness", "order": 1, "coefficient": k1},
+                  {"dof": i, "physics": "stiffness", "order": 3, "coefficient": k3},
+                  {"dof": i, "physics": "velocity_damping", "order": 1, "coefficient": 0.5}]
+    cov = [{"dof": i, "terms": [["stiffness", 1], ["stiffness", 3]], "matrix": np.diag([4.0, 1e8]).tolist()}
+           for i in range(2)]
+    m = g.from_terms([0.05, 0.05], terms, "chain", covariance=cov)
+    f, A = _grid()
+    x_range = [[-0.05, 0.05]] * 2
+    key = jax.random.key(3)
+    sol = g.basin_probability(m, f, A, key, 5, x_range=x_range)
+    bp = sol.value
+    assert sol.stats["samples_used"] == 5 and sol.stats["samples_drawn"] == 5
+    samples = g.sample_models(m, key, 5)
+    configs = []
+    for k in range(5):
+        mk = jax.tree.map(lambda a: a[k] if eqx.is_array(a) else a, samples)
+        configs.append(np.asarray(basin_map(mk, f, A, stable_wells(mk, x_range)).value.config))
+    stack = np.stack(configs)
+    assert len(np.unique(stack)) >= 2 and np.any(np.ptp(stack, axis=0) > 0)  # the draws disagree somewhere
+    want = np.stack([np.mean(stack == c, axis=0) for c in np.asarray(bp.configs)], axis=-1)
+    np.testing.assert_array_equal(np.asarray(bp.probability), want)
+    np.testing.assert_array_equal(np.asarray(bp.mean_config),
+                                  np.asarray(basin_map(m, f, A, stable_wells(m, x_range)).value.config))

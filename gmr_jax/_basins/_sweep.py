@@ -542,3 +542,48 @@ def n_chunk_compiles() -> int:
     """Number of compiled single-device sweep functions (a trace counter for tests)."""
     return _sweep_points._cached._cache_size()
 
+
+
+def ensemble_configs(models, f_np, a_np, wells_m, x0s, settings: SweepSettings, chunk=None, devices=None,
+                     progress=None):
+    """Configurations (M, NA, NF) and RESULTS codes (M, NA, NF) of M models of one structure
+    (`models`: a `GlobalModel` whose arrays have a leading axis M, `wells_m` (M, dof, max_wells),
+    `x0s` (M, dof)) over one (f, A) grid. Under "lanes" batching the models are data: every
+    (model, grid point) pair goes through one compiled lanes loop (each lane carries its
+    point's coefficients, wells and box), so M models cost one sweep of M x NA x NF points, not M
+    sweeps; other batchings sweep the models one after another with `basin_map`."""
+    m_count = wells_m.shape[0]
+    devices = tuple(jax.devices() if devices is None else devices)
+    batching = resolve_batching(jax.tree.map(lambda a: a[0] if eqx.is_array(a) else a, models), settings, devices)
+    na, nf = a_np.size, f_np.size
+    if batching != "lanes":
+        configs, codes = [], []
+        for k in range(m_count):
+            mk = jax.tree.map(lambda a, k=k: a[k] if eqx.is_array(a) else a, models)
+            sol = basin_map(mk, f_np, a_np, wells_m[k], x0=x0s[k], settings=settings, chunk=chunk, devices=devices,
+                            throw=False)
+            configs.append(np.asarray(sol.value.config))
+            codes.append(np.asarray(sol.value.result))
+            if progress is not None:
+                progress(k + 1, m_count)
+        return np.stack(configs), np.stack(codes)
+    settings = dataclasses.replace(settings, batching="lanes")
+    dtype = PRECISIONS[settings.precision]
+    if dtype != jnp.float64:
+        models = _cast(models, dtype)
+    ff, aa = np.meshgrid(f_np, a_np)
+    flat_f, flat_a = ff.ravel(), aa.ravel()
+    order = np.lexsort((flat_a, flat_f))  # by f, then A; the models of one grid point side by side
+    n_grid = flat_f.size
+    fs = np.repeat(flat_f[order], m_count)
+    amps = np.repeat(flat_a[order], m_count)
+    mids = np.tile(np.arange(m_count), n_grid)
+    report = None if progress is None else (lambda done, total: progress(done * m_count // total, m_count))
+    cat, _ = _run_points(models, True, settings, _traced(settings), jnp.asarray(x0s, dtype), jnp.asarray(wells_m, dtype),
+                         fs, amps, mids, chunk, devices, report)
+    config, code = cat[1], cat[2]
+    out_cfg, out_code = np.empty((m_count, n_grid), config.dtype), np.empty((m_count, n_grid), code.dtype)
+    slot = np.arange(n_grid * m_count)
+    out_cfg[mids, order[slot // m_count]] = config
+    out_code[mids, order[slot // m_count]] = code
+    return out_cfg.reshape(m_count, na, nf), out_code.reshape(m_count, na, nf)
