@@ -25,7 +25,9 @@ class BasinProbability(eqx.Module):
     or failed), ascending; `probability` (NA, NF, c): per grid point, the share of the used
     samples that ended in each; `most_likely` (NA, NF): the configuration of highest
     probability; `confidence` (NA, NF): its probability; `mean_config` (NA, NF): the
-    configuration the model itself (the distribution's mean) ends in."""
+    configuration the model itself (the distribution's mean) ends in; `unsettled` (NA, NF): the
+    share of the used samples that had not settled in a well by t1 (`not_settled`: counted in
+    configuration -1 with the ones that failed or diverged; a longer settle time decides them)."""
 
     f: Float[Array, " nf"]
     A: Float[Array, " na"]
@@ -34,6 +36,7 @@ class BasinProbability(eqx.Module):
     most_likely: Int[Array, "na nf"]
     confidence: Float[Array, "na nf"]
     mean_config: Int[Array, "na nf"]
+    unsettled: Float[Array, "na nf"]
 
 
 def feeds_energy(model: GlobalModel, wells: np.ndarray, x_range) -> list[str]:
@@ -161,7 +164,8 @@ def basin_probability(
     if not n_used:
         shape = mean_config.shape
         value = BasinProbability(f=fj, A=aj, configs=jnp.zeros(0, int), probability=jnp.zeros(shape + (0,)),
-                                 most_likely=jnp.full(shape, -1), confidence=jnp.zeros(shape), mean_config=mean_config)
+                                 most_likely=jnp.full(shape, -1), confidence=jnp.zeros(shape), mean_config=mean_config,
+                                 unsettled=jnp.zeros(shape))
         return Solution(value=value, result=RESULTS.nonfinite, stats=dict(stats, samples_used=0))
     stack_c = configs[1:]  # (used, NA, NF)
     values = np.unique(stack_c)
@@ -169,5 +173,6 @@ def basin_probability(
     best = np.argmax(prob, axis=-1)
     value = BasinProbability(f=fj, A=aj, configs=jnp.asarray(values), probability=jnp.asarray(prob),
                              most_likely=jnp.asarray(values[best]), confidence=jnp.asarray(np.max(prob, axis=-1)),
-                             mean_config=mean_config)
+                             mean_config=mean_config,
+                             unsettled=jnp.asarray(np.mean(codes[1:] == RESULTS.not_settled._value, axis=0)))
     return Solution(value=value, result=RESULTS.successful, stats=stats)

@@ -98,7 +98,7 @@ def _probability(gmr, model, args, f, A, x0, settings, out, wells) -> None:
     conf = np.asarray(bp.confidence)
     np.savez(out / "basins_probability.npz", f=f, A=A, configs=np.asarray(bp.configs),
              probability=np.asarray(bp.probability), most_likely=np.asarray(bp.most_likely), confidence=conf,
-             mean_config=np.asarray(bp.mean_config))
+             mean_config=np.asarray(bp.mean_config), unsettled=np.asarray(bp.unsettled))
     fig, ax = plt.subplots(figsize=(6.4, 4.8))
     im = ax.pcolormesh(f, A, conf, vmin=0.0, vmax=1.0, cmap="viridis", shading="nearest")
     fig.colorbar(im, ax=ax, label="probability of the most likely configuration")
@@ -114,12 +114,14 @@ def _probability(gmr, model, args, f, A, x0, settings, out, wells) -> None:
           f"likely at {100 * float(np.mean(conf >= 0.9)):.3g} %; the model's own map is the most likely at "
           f"{100 * agree:.3g} % (basins_probability.npz, basins_confidence.png)")
     configs = np.asarray(bp.configs)
-    if np.any(configs == -1):  # audit: draws that did not settle were counted as used, and nothing said so
-        unsettled = np.asarray(bp.probability)[..., int(np.argmax(configs == -1))]
+    if np.any(configs == -1):
+        lost = np.asarray(bp.probability)[..., int(np.argmax(configs == -1))]
+        unsettled = np.asarray(bp.unsettled)
         most = int(np.sum(np.asarray(bp.most_likely) == -1))
-        print(f"gmr basins: warning: --draws: {100 * float(np.mean(unsettled)):.3g} % of the drawn runs did not "
-              f"settle in a well or failed (configuration -1), the most likely outcome at {most} of {conf.size} "
-              f"points: lengthen --settle-time (now {args.settle_time:g} s), or those points' maps are unknown")
+        print(f"gmr basins: warning: --draws: {100 * float(np.mean(lost)):.3g} % of the drawn runs ended in no well "
+              f"(configuration -1): {100 * float(np.mean(unsettled)):.3g} % had not settled (lengthen --settle-time, "
+              f"now {args.settle_time:g} s), {100 * float(np.mean(lost - unsettled)):.3g} % failed or diverged; the "
+              f"most likely outcome at {most} of {conf.size} points, whose maps are unknown")
 
 
 def _beyond_data(model, model_path, A, load: str) -> str | None:
@@ -164,38 +166,20 @@ def _beyond_data(model, model_path, A, load: str) -> str | None:
             f"bound: dynamic overshoot goes beyond at lower A too)")
 
 
-def _settle_advice(model, wells, settle_time: float, max_configs: int = 64) -> str:
+def _settle_advice(model, wells, settle_time: float) -> str:
     """What to pass where points had not settled: the slowest decay rate sigma of the model's free
-    motion about its stable configurations (each DOF at one of its wells; the eigenvalues of the
-    linearised equations of motion, at most `max_configs` configurations), and the settle time
-    7 / sigma in which that mode decays a thousandfold."""
-    import itertools
+    motion about its stable configurations (`slowest_decay`), and the settle time 7 / sigma in
+    which that mode decays a thousandfold."""
+    from .._basins._settle import DECAYS, slowest_decay
 
-    import jax
-    import jax.numpy as jnp
-
-    d = model.n_dof
-    per_dof = [w[~np.isnan(w)] for w in np.asarray(wells, float)]
-
-    def field(state):
-        x, v = state[:d], state[d:]
-        return jnp.concatenate([v, model.accelerations(x, v, 0.0, jnp.zeros(d))])
-
-    jac = jax.jit(jax.jacfwd(field))
-    rates, scale = [], 0.0
-    for conf in itertools.islice(itertools.product(*per_dof), max_configs):
-        state = jnp.concatenate([jnp.asarray(conf, float), jnp.zeros(d)])
-        ev = np.linalg.eigvals(np.asarray(jac(state)))
-        rates.append(float(np.min(-ev.real)))
-        scale = max(scale, float(np.max(np.abs(ev))))
-    sigma = min(rates) if rates else float("nan")
+    sigma, scale = slowest_decay(model, wells)
     if not np.isfinite(sigma):
         return f"points not settled: lengthen --settle-time (now {settle_time:g} s)"
     if sigma <= 1e-9 * scale:  # rounding of a purely imaginary pair
         return (f"points not settled: the model's free motion about a configuration of its wells does not decay "
                 f"(slowest linearised decay rate {sigma:.3g} 1/s: no damping there), so no settle time will do; "
                 f"check its damping terms")
-    need = 7.0 / sigma
+    need = DECAYS / sigma
     return (f"points not settled: the model's slowest free vibration about its wells decays at {sigma:.3g} 1/s "
             f"(time constant {1 / sigma:.3g} s), so it needs about {need:.3g} s to settle "
             f"(now {settle_time:g} s): rerun with --settle-time {float(f'{need:.2g}'):g}")
