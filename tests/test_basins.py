@@ -600,3 +600,59 @@ def test_basin_probability_sweeps_the_drawn_models_as_one_batch_with_the_loops_a
     np.testing.assert_array_equal(np.asarray(bp.probability), want)
     np.testing.assert_array_equal(np.asarray(bp.mean_config),
                                   np.asarray(basin_map(m, f, A, stable_wells(m, x_range)).value.config))
+
+
+# -- traceable: jit, vmap over models, gradients with respect to the load ----------------------
+def test_basin_map_is_a_pure_function_under_jit_and_vmap():
+    """With the wells and settings fixed, `basin_map` jits (new grid values reuse the program) and
+    vmaps over stacked models, with the eager map's answer."""
+    import functools
+
+    m = chain()
+    wells = stable_wells(m, [[-0.05, 0.05]] * 2)
+    f, A = _grid()
+    eager = basin_map(m, f, A, wells).value
+    run = jax.jit(functools.partial(basin_map, wells=wells, settings=SweepSettings()))
+    sol = run(m, f, A)
+    np.testing.assert_array_equal(np.asarray(sol.value.config), np.asarray(eager.config))
+    np.testing.assert_array_equal(np.asarray(sol.value.result), np.asarray(eager.result))
+    np.testing.assert_allclose(np.asarray(sol.value.x_final), np.asarray(eager.x_final), atol=1e-5)
+    # (the points in another order among the lanes: rounding may flip an accept near err = 1)
+    assert int(sol.stats["num_steps"]) == pytest.approx(int(np.sum(np.asarray(eager.steps))), rel=0.01)
+    run(m, f * 1.01, A * 0.99)
+    assert run._cache_size() == 1  # new grid values: the same program
+    # vmap over models (coefficients as data): each one's own map
+    scales = jnp.asarray([0.9, 1.0, 1.15])
+    models = jax.vmap(lambda s: eqx.tree_at(lambda q: q.stiffness, m, m.stiffness * s))(scales)
+    configs = jax.vmap(lambda mk: basin_map(mk, f, A, wells).value.config)(models)
+    for k, s in enumerate(scales):
+        mk = eqx.tree_at(lambda q: q.stiffness, m, m.stiffness * s)
+        np.testing.assert_array_equal(np.asarray(configs[k]), np.asarray(basin_map(mk, f, A, wells).value.config))
+    with pytest.raises(g.GMRInputError, match="wells and the settings fixed"):
+        jax.jit(lambda w: basin_map(m, f, A, w).value.config)(jnp.asarray(wells))
+
+
+def test_gradient_of_the_final_miss_matches_central_differences():
+    """`BasinMap.miss` (how far each point ended from a target configuration, smooth in the final
+    state) differentiated with respect to the load's frequencies and amplitudes through the sweep
+    agrees with central differences of the eager map, point by point (a short settle time: the
+    state still moves at t1, so the derivatives are O(1))."""
+    m = chain()
+    wells = stable_wells(m, [[-0.05, 0.05]] * 2)
+    st = SweepSettings(settle_time=0.5, integrator=g.Integrator(rtol=1e-11, atol=1e-13, max_steps=100_000))
+
+    def miss(f, A):
+        return basin_map(m, f, A, wells, settings=st).value.miss(wells, [1, 1])
+
+    f0, a0 = jnp.asarray([0.7, 1.3, 2.0]), jnp.asarray([0.9, 1.6])
+    gf, ga = jax.grad(lambda f, A: jnp.sum(miss(f, A)), argnums=(0, 1))(f0, a0)
+    h = 1e-5
+    cf = np.array([np.sum(miss(f0.at[i].add(h), a0) - miss(f0.at[i].add(-h), a0)) / (2 * h) for i in range(3)])
+    ca = np.array([np.sum(miss(f0, a0.at[i].add(h)) - miss(f0, a0.at[i].add(-h))) / (2 * h) for i in range(2)])
+    assert np.all(np.abs(cf) > 1e-3) and np.all(np.abs(ca) > 1e-3)  # not a trivially flat quantity
+    np.testing.assert_allclose(np.asarray(gf), cf, rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(ga), ca, rtol=1e-5)
+    # forward mode too, and the eager value is the traced one
+    val, tan = jax.jvp(miss, (f0, a0), (jnp.zeros(3), jnp.ones(2)))
+    np.testing.assert_allclose(np.asarray(val), np.asarray(miss(f0, a0)), rtol=1e-9)
+    np.testing.assert_allclose(np.asarray(tan).sum(), ca.sum(), rtol=1e-5)

@@ -30,6 +30,7 @@ inside the box); a diffrax code the solver or controller returned (e.g. an impli
 `nonlinear_divergence`), promoted to `RESULTS`.
 """
 
+import dataclasses
 import math
 
 import diffrax as dfx
@@ -201,6 +202,9 @@ def _lanes_final_states(models, settings, solver, x0s, fs, amps, mids, lo, hi, l
     bterm = dfx.ODETerm(lanes_field(models, settings.load, d, per_lane))
     term1 = dfx.ODETerm(half_sine_field(settings.load, d))
     error_order = solver.error_order(bterm)
+    if isinstance(solver, dfx.AbstractRungeKutta) and solver.scan_kind is None:
+        # the stages in a plain loop (the same arithmetic): forward-mode derivatives pass through it
+        solver = dataclasses.replace(solver, scan_kind="lax")
     if isinstance(solver, dfx.AbstractImplicitSolver):
         # as `diffeqsolve` does: a root finder's tolerances left to the step-size controller take its own
         from diffrax._root_finder import use_stepsize_tol

@@ -16,12 +16,12 @@ from jax.sharding import PartitionSpec as P
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._config import relieve_map_pressure
-from .._errors import GMRInputError, check_real, describe
+from .._errors import GMRInputError, check_real, describe, is_tracer
 from .._model._model import AbstractMechanicalModel
 from .._simulate._inputs import half_sine
 from .._simulate._integrate import Integrator, integrate, vector_field
 from .._simulate._simulate import has_coulomb
-from .._solution import RESULTS, Solution, as_result, code_name, raise_if_failed, value_of
+from .._solution import RESULTS, Solution, as_result, code_name, error_if_failed, raise_if_failed, value_of
 from . import _native
 from ._joint import joint_final_states
 from ._lanes import SOLVERS as LANE_SOLVERS, as_solver, lanes_final_states, solver_name
@@ -146,6 +146,21 @@ class BasinMap(eqx.Module):
     x_final: Float[Array, "na nf dof"]
     v_final: Float[Array, "na nf dof"]
     steps: Int[Array, "na nf"]
+
+    def miss(self, wells: Float[ArrayLike, "dof max_wells"], target) -> Float[Array, "na nf"]:
+        """How far each point ended from the `target` configuration, a smooth quantity of the
+        final state: mean over cells i of ((x_i - w_i) / s_i)^2 + (v_i / (s_i · 1 s⁻¹))^2, w_i the
+        target's well of cell i, s_i the span of cell i's wells. Zero at rest in the target;
+        differentiable with respect to the grid (`basin_map` under `jax.grad`).
+
+        **Arguments:** `wells` as given to `basin_map`; `target` (dof,) the well index of each
+        cell (e.g. `[0, 1, 1]`).
+        """
+        w = jnp.asarray(wells, self.x_final.dtype)
+        span, _ = _geometry(w)
+        goal = jnp.take_along_axis(w, jnp.asarray(target, int)[:, None], axis=1)[:, 0]
+        goal, span = goal[None, None], span[None, None]
+        return jnp.mean(((self.x_final - goal) / span) ** 2 + (self.v_final / span) ** 2, axis=-1)
 
 
 def _member_final_state(model, settings: SweepSettings, x0, f, a, centre, span):
@@ -400,7 +415,19 @@ def basin_map(
 
     Compiled shapes depend only on the number of points, `chunk`, the devices and the model's
     structure: new f, A, settle times, tolerances or coefficient values do not recompile.
+
+    Under `jax.jit`, `jax.vmap` (e.g. over stacked models) or `jax.grad`, with `wells` and
+    `settings` fixed (concrete), `basin_map` is a pure function of the model, `f`, `A` and
+    `x0`: one "lanes" sweep on the default device, `stats` holding only `num_steps` (the
+    points' total step attempts), a Coulomb term smoothed as outside jit (with traced
+    coefficients, e.g. under `vmap` over models, only when `settings.sign_eps` says so), and
+    `throw=True` an `eqx.error_if` check. `x_final` and `v_final` are differentiable with respect
+    to `f` and `A` (each point's derivatives by forward mode through its own solve, a custom
+    JVP linear in the grid's tangents: `jax.jvp` and `jax.grad` of any smooth function of them, e.g.
+    `BasinMap.distance_to`); not with respect to the model's coefficients.
     """
+    if any(is_tracer(leaf) for leaf in jax.tree.leaves((model, f, A, wells, x0, settings))):
+        return _traced_map(model, f, A, wells, x0, settings, chunk, throw)
     relieve_map_pressure()  # a long session's compiled programs (`_config.map_pressure`)
     f_np, a_np, wells_np, x0_np = _check_inputs(model, f, A, wells, x0)
     model, sign_eps = friction_smoothing(model, settings, wells_np)
@@ -434,6 +461,80 @@ def basin_map(
     first[order] = np.arange(n)
     return _finish(cat, first, f_np, a_np, x0.shape[0], {**extra, "sign_eps": sign_eps, "solver": solver}, batching,
                    throw)
+
+
+def _traced_map(model, f, A, wells, x0, settings: SweepSettings, chunk, throw: bool) -> Solution:
+    """`basin_map` as a pure function of traced arrays (its docstring): one lanes sweep."""
+    if is_tracer(wells) or not isinstance(settings, SweepSettings) or any(
+            is_tracer(leaf) for leaf in jax.tree.leaves(settings)):
+        raise GMRInputError("basin_map under jax.jit / vmap / grad needs the wells and the settings fixed (concrete "
+                            "values, e.g. functools.partial(basin_map, wells=wells, settings=settings)): they decide "
+                            "the classification and the compiled program")
+    if settings.batching not in ("auto", "lanes"):
+        raise GMRInputError(f"basin_map under jax.jit / vmap / grad runs batching='lanes' (got "
+                            f"{settings.batching!r}: it runs outside jit); use SweepSettings(batching='lanes')")
+    if not isinstance(model, AbstractMechanicalModel):
+        raise GMRInputError(f"basin_map needs a mechanical model (GlobalModel, KreslingChain, ...), got "
+                            f"{type(model).__name__}")
+    wells_np = np.asarray(wells, float)
+    d = model.n_dof
+    if wells_np.ndim != 2 or wells_np.shape[0] != d:
+        raise GMRInputError(f"wells must be (dof, max_wells) = ({d}, k) for this {d}-DOF model, got shape "
+                            f"{wells_np.shape}")
+    if jnp.ndim(f) != 1 or jnp.ndim(A) != 1:
+        raise GMRInputError(f"f and A must be 1-D arrays of grid values, got shapes {jnp.shape(f)}, {jnp.shape(A)}")
+    settings = dataclasses.replace(settings, batching="lanes")
+    if not any(is_tracer(leaf) for leaf in jax.tree.leaves(model)):
+        model, _ = friction_smoothing(model, settings, wells_np)
+    elif settings.sign_eps is not None and settings.sign_eps > 0:  # traced coefficients: smoothed when asked
+        model = model.with_sign_eps(float(settings.sign_eps))
+    dtype = PRECISIONS[settings.precision]
+    wells_j = jnp.asarray(wells_np, dtype)
+    x0 = wells_j[:, 0] if x0 is None else jnp.asarray(x0, dtype)
+    f, A = jnp.asarray(f, dtype), jnp.asarray(A, dtype)
+    ff, aa = jnp.meshgrid(f, A)
+    fs, amps = ff.ravel(), aa.ravel()
+    n = fs.shape[0]
+    lanes = min(int(chunk) if chunk is not None else default_chunk(d, "lanes"), n)
+    st = _traced(settings)
+    mids = jnp.zeros(n, jnp.int32)
+
+    def states(fs, amps):
+        return _chunks(model, st, x0[None], wells_j[None], fs, amps, mids, lanes, False)
+
+    def derivatives(fs, amps):
+        # each point's final state depends on its own (f, A) only: one forward-mode pass with the two
+        # tangents (all f, all A) gives every point's derivatives
+        def one(t_f, t_a):
+            out, tan = jax.jvp(states, (fs, amps), (t_f, t_a))
+            return out, (tan[3], tan[4])
+
+        ones, zeros = jnp.ones_like(fs), jnp.zeros_like(fs)
+        return jax.vmap(one, out_axes=(None, 0))(jnp.stack([ones, zeros]), jnp.stack([zeros, ones]))
+
+    @jax.custom_jvp
+    def sweep(fs, amps):
+        return states(fs, amps)
+
+    @sweep.defjvp
+    def _(primals, tangents):
+        # the tangent is linear in (t_f, t_a) with the points' own derivatives: jvp and its transpose (grad)
+        out, (dx, dv) = derivatives(*primals)
+        t_f, t_a = (t[:, None] for t in tangents)
+        none = lambda o: np.zeros(o.shape, jax.dtypes.float0)  # noqa: E731  (integer outputs)
+        return out, (none(out[0]), none(out[1]), none(out[2]), dx[0] * t_f + dx[1] * t_a, dv[0] * t_f + dv[1] * t_a,
+                     none(out[5]))
+
+    idx, config, code, x1, v1, steps = sweep(fs, amps)
+    na, nf = A.shape[0], f.shape[0]
+    bm = BasinMap(f=f, A=A, wells=idx.reshape(na, nf, d), config=config.reshape(na, nf),
+                  result=code.reshape(na, nf), x_final=x1.reshape(na, nf, d), v_final=v1.reshape(na, nf, d),
+                  steps=steps.reshape(na, nf))
+    outcome = (code == RESULTS.successful._value) | (code == RESULTS.diverged._value) | (
+        code == RESULTS.not_settled._value)
+    first = jnp.argmax(~outcome)
+    result = as_result(jnp.where(jnp.any(~outcome), code[first], RESULTS.successful._value))
+    return error_if_failed(Solution(value=bm, result=result, stats={"num_steps": jnp.sum(steps)}), throw)
 
 
 def _run_points(model, ensemble, settings, settings_t, x0s, wells, fs, amps, mids, chunk, devices, progress):
