@@ -38,6 +38,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 
 from .._fit._library import signed_power
 from .._model._model import GlobalModel
@@ -161,6 +162,13 @@ def lanes_field(model, load: str, d: int, per_lane: bool):
     return field
 
 
+def _lane_rms(tree):
+    """RMS over the components of each lane (leaves shaped (..., B)): (B,)."""
+    leaves = jax.tree.leaves(tree)
+    total = sum(jnp.sum(jnp.reshape(leaf, (-1, leaf.shape[-1])) ** 2, axis=0) for leaf in leaves)
+    return jnp.sqrt(total / sum(leaf.size // leaf.shape[-1] for leaf in leaves))
+
+
 def _promote(result):
     return RESULTS.promote(result)._value
 
@@ -193,7 +201,9 @@ def _lanes_final_states(models, settings, solver, x0s, fs, amps, mids, lo, hi, l
     max_steps = settings.integrator.max_steps
     ok_, div_, maxs_, fail_ = (RESULTS.successful._value, RESULTS.diverged._value,
                                RESULTS.max_steps_reached._value, RESULTS.simulation_failed._value)
-    controller = dfx.PIDController(rtol=rtol, atol=atol)
+    # diffrax's controller with its RMS norm taken per lane (over the lane's own components, axis
+    # 0): every quantity it computes is then elementwise in the lanes, each lane its own decision
+    controller = dfx.PIDController(rtol=rtol, atol=atol, norm=_lane_rms)
     # an explicit Runge-Kutta step is elementwise in the lanes: it runs once on the lane-batched
     # state (each lane its own t0, t1), the stages' buffers with the lanes on the fast axis; any
     # other solver (an implicit one solves a nonlinear system per step) is vmapped lane by lane
@@ -210,8 +220,10 @@ def _lanes_final_states(models, settings, solver, x0s, fs, amps, mids, lo, hi, l
         from diffrax._root_finder import use_stepsize_tol
 
         attrs = [a for a in ("rtol", "atol", "norm") if getattr(solver.root_finder, a) is use_stepsize_tol]
+        # (the norm: the plain RMS of the one lane the vmapped step sees)
+        own = {"rtol": controller.rtol, "atol": controller.atol, "norm": optx.rms_norm}
         solver = eqx.tree_at(lambda s: tuple(getattr(s.root_finder, a) for a in attrs), solver,
-                             tuple(getattr(controller, a) for a in attrs))
+                             tuple(own[a] for a in attrs))
     last = lambda a: jnp.moveaxis(a, 0, -1)  # noqa: E731
     # every per-lane quantity has the lanes on its last axis; models stacked on the last axis too
     models_l = jax.tree.map(last, models) if ensemble else models
@@ -232,8 +244,8 @@ def _lanes_final_states(models, settings, solver, x0s, fs, amps, mids, lo, hi, l
         return jax.vmap(lambda t0, t1, y, args: solver.init(term1, t0, t1, y, args),
                         in_axes=(-1, -1, -1, (lane_axes, -1, -1, -1)), out_axes=-1)(t0, t1, y, args)
 
-    adapt = jax.vmap(lambda t0, t1, y0, y1, y_err, cs: controller.adapt_step_size(
-        t0, t1, y0, y1, None, y_err, error_order, cs), in_axes=(-1, -1, -1, -1, -1, -1), out_axes=-1)
+    def adapt(t0, t1, y0, y1, y_err, cs):
+        return controller.adapt_step_size(t0, t1, y0, y1, None, y_err, error_order, cs)
 
     # every point starts at rest in its model's x0 with its load at sin(0) = 0: the solver's and the
     # controller's first states depend on the model only (one per model, gathered into the lanes)
@@ -241,8 +253,7 @@ def _lanes_final_states(models, settings, solver, x0s, fs, amps, mids, lo, hi, l
     y_m = (x0_l, jnp.zeros_like(x0_l))
     start_args = ((models_l if ensemble else models), ones, zeros, ones)
     ss_m = init(zeros, ones, y_m, start_args)
-    cs_m = jax.vmap(lambda y: controller.init(bterm, 0.0, 1.0, y, 1.0, None, None, error_order)[1],
-                    in_axes=-1, out_axes=-1)(y_m)
+    cs_m = controller.init(bterm, zeros, ones, y_m, ones, None, None, error_order)[1]
 
     def gather(tree, m):
         # a scalar of the solver's state (a first-same-as-last solver's "first step" flag) is per lane
