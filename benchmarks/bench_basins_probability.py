@@ -4,9 +4,11 @@ against the loop that sweeps one drawn model after another, same draws, one run.
 The 3-cell chain of `bench_basins` (c = 1 N s/m) with a covariance of 1 % (standard deviation)
 on every coefficient, 16 draws, a 50 x 50 (f, A) grid, settle 10 s, rtol 1e-6 / atol 1e-8, all
 CPU cores. The loop is what `basin_probability` did before: per draw its wells, its passivity
-check and one `basin_map` call, here with each batching ("native": the C kernel; "lanes").
-Reported: wall time of each (best of `--reps`, compile apart), the ratio, and whether the
-probabilities agree (points where they differ lie next to a basin boundary).
+check and one `basin_map` call, here with each batching ("native": the C kernel, the default
+before the lanes ran on diffrax; "lanes"). Reported: wall time of each (best of `--reps`,
+compile apart), the ratio, whether the probabilities agree (points where they differ lie next
+to a basin boundary), and a loop's cost per `basin_map` call beyond the integration (a call on a
+2 x 2 grid): the most that sweeping the draws as one batch can save.
 
     python benchmarks/bench_basins_probability.py            # ~2 min on 2 cores
 """
@@ -108,8 +110,18 @@ def main():
                                       "batched_speedup": run / rows["batched (lanes, models as data)"]["run_s"],
                                       "points_same_probabilities": float(np.mean(same)),
                                       "mean_map_same": float(np.mean(mean == np.asarray(bp.mean_config))),
-                                      "max_probability_difference": float(np.max(np.abs(prob - np.asarray(bp.probability))))}
+                                      "max_probability_difference":
+                                          float(np.max(np.abs(prob - np.asarray(bp.probability))))}
         print(json.dumps(rows[f"loop ({batching})"]), flush=True)
+    # what a loop pays per basin_map call beyond the integration: 17 calls on a 2 x 2 grid
+    w = g.stable_wells(model, x_range)
+    for batching in args.loops:
+        st = g.SweepSettings(batching=batching)
+        g.basin_map(model, f[:2], a[:2], w, settings=st)
+        t = time.perf_counter()
+        for _ in range(args.draws + 1):
+            g.basin_map(model, f[:2], a[:2], w, settings=st)
+        rows[f"loop ({batching})"]["call_overhead_s"] = (time.perf_counter() - t) / (args.draws + 1)
     print(json.dumps({"command": "python benchmarks/bench_basins_probability.py", "cores": N_CORES,
                       "jax": jax.__version__, "rows": rows}, indent=1))
 

@@ -24,7 +24,7 @@ from .._simulate._simulate import has_coulomb
 from .._solution import RESULTS, Solution, as_result, code_name, error_if_failed, raise_if_failed, value_of
 from . import _native
 from ._joint import joint_final_states
-from ._lanes import SOLVERS as LANE_SOLVERS, as_solver, lanes_final_states, solver_name
+from ._lanes import SOLVERS as LANE_SOLVERS, as_solver, lanes_final_states
 
 LOADS = ("tip", "base")
 BATCHINGS = ("auto", "native", "lanes", "joint", "member")
@@ -680,8 +680,8 @@ def ensemble_configs(models, f_np, a_np, wells_m, x0s, settings: SweepSettings, 
     amps = np.repeat(flat_a[order], m_count)
     mids = np.tile(np.arange(m_count), n_grid)
     report = None if progress is None else (lambda done, total: progress(done * m_count // total, m_count))
-    cat, _ = _run_points(models, True, settings, _traced(settings), jnp.asarray(x0s, dtype), jnp.asarray(wells_m, dtype),
-                         fs, amps, mids, chunk, devices, report)
+    cat, _ = _run_points(models, True, settings, _traced(settings), jnp.asarray(x0s, dtype),
+                         jnp.asarray(wells_m, dtype), fs, amps, mids, chunk, devices, report)
     config, code = cat[1], cat[2]
     out_cfg, out_code = np.empty((m_count, n_grid), config.dtype), np.empty((m_count, n_grid), code.dtype)
     slot = np.arange(n_grid * m_count)

@@ -201,8 +201,8 @@ def _robustness(gmr, model, act, wells, settings, target: int, args) -> dict:
         rest += (f", {100 * float(unsettled[0]):.0f} % had not settled {settings.sweep.settle_time:g} s after the "
                  f"load (undecided: lengthen --settle-time)")
     sentence = (f"{'warning' if share[0] < ROBUST_SHARE else 'robustness'}: over {used} models drawn from the file's "
-                f"covariance (the structures its data admit), the design deploys {100 * float(share[0]):.0f} % ({rest}); "
-                f"{tail}")
+                f"covariance (the structures its data admit), the design deploys {100 * float(share[0]):.0f} % "
+                f"({rest}); {tail}")
     return {"draws": used, "drawn": int(st["samples_drawn"]), "ladder": lad, "share_at_design": float(share[0]),
             "unsettled_at_design": float(unsettled[0]), "elsewhere_at_design": float(elsewhere[0]),
             "settle_time": float(settings.sweep.settle_time), "robust_A": a95, "sentence": sentence}
