@@ -559,7 +559,7 @@ def _run_points(model, ensemble, settings, settings_t, x0s, wells, fs, amps, mid
     pad = np.concatenate([np.arange(n), np.full(total - n, n - 1)])
     # call c, device j, slot i holds chunk (c * k + i) * nd + j: devices take turns
     layout = pad.reshape(calls, k, nd, chunk).transpose(0, 2, 1, 3).reshape(calls, -1)
-    run = None if nd == 1 else _sharded(devices, chunk, ensemble)
+    run = None if nd == 1 else (_sharded(devices, chunk, True) if ensemble else _sharded(devices, chunk))
     multi = jax.process_count() > 1 and run is not None
     if multi:  # host values, identical in every process, are what a multi-process jit takes
         model, settings_t, x0s, wells = jax.tree.map(
