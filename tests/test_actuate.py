@@ -66,6 +66,7 @@ def test_actuate_reaches_target_and_beats_grid():
     assert sol.result == RESULTS.successful
     assert act.kind == "half_sine" and act.peak == act.A
     assert st["verified_config"] == 3 and st["verified_wells"] == [1, 1] and st["basin_map_config"] == 3
+    assert st["verified_result"] == "successful"
     assert st["solves"] == st["forward_solves"] + 2 * st["gradient_evaluations"] + st["verify_solves"]
     assert st["gradient_evaluations"] > 0
     # independent check: plain simulation of the exact model, classified as basin_map does
