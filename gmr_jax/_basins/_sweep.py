@@ -46,7 +46,7 @@ class SweepSettings(eqx.Module):
     - `load`: "tip" (default, Eq. 25: force A sin(2πft) on the last mass for t <= 1/(2f)) or
       "base" (the same half-sine as base acceleration, A in m/s²).
     - `batching`: "lanes" (default; "auto" is the same): diffrax's `solver.step` and
-      `PIDController` vmapped over `chunk` lanes inside one loop (`_lanes`), each point with its
+      `PIDController` on `chunk` lanes at once inside one loop (`_lanes`), each point with its
       own time, step size, controller state and accept/reject decision, and a lane whose point
       is done takes the next point of the queue (the step count per point is one
       `diffeqsolve`'s; no member waits for the slowest); runs on every device, under `jax.jit`.
@@ -424,7 +424,7 @@ def basin_map(
     `throw=True` an `eqx.error_if` check. `x_final` and `v_final` are differentiable with respect
     to `f` and `A` (each point's derivatives by forward mode through its own solve, a custom
     JVP linear in the grid's tangents: `jax.jvp` and `jax.grad` of any smooth function of them, e.g.
-    `BasinMap.distance_to`); not with respect to the model's coefficients.
+    `BasinMap.miss`); not with respect to the model's coefficients.
     """
     if any(is_tracer(leaf) for leaf in jax.tree.leaves((model, f, A, wells, x0, settings))):
         return _traced_map(model, f, A, wells, x0, settings, chunk, throw)
