@@ -656,3 +656,22 @@ def test_gradient_of_the_final_miss_matches_central_differences():
     val, tan = jax.jvp(miss, (f0, a0), (jnp.zeros(3), jnp.ones(2)))
     np.testing.assert_allclose(np.asarray(val), np.asarray(miss(f0, a0)), rtol=1e-9)
     np.testing.assert_allclose(np.asarray(tan).sum(), ca.sum(), rtol=1e-5)
+
+
+def test_cli_basins_settles_by_the_models_own_time_by_default(tmp_path, capsys):
+    """Without --settle-time, `gmr basins` judges final states after the model's own settle time
+    (7 / its slowest linearised decay rate, here 47 s), said in its output: a lightly damped
+    model that 10 s leaves moving is classified everywhere."""
+    from gmr_jax._cli._main import main
+
+    terms = [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -2.0},
+             {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 2.0},
+             {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.3}]
+    g.save_model(g.from_terms([1.0], terms, topology="chain"), tmp_path / "m.json")
+    grid = ["--f", "0.05:0.5:3", "--A", "0.5:2:3"]
+    assert main(["basins", str(tmp_path / "m.json"), *grid, "--settle-time", "10", "--out", str(tmp_path / "a")]) == 0
+    assert np.any(np.load(tmp_path / "a" / "basins.npz")["result"] == g.RESULTS.not_settled._value)
+    capsys.readouterr()
+    assert main(["basins", str(tmp_path / "m.json"), *grid, "--out", str(tmp_path / "b")]) == 0
+    assert "settle time 47 s after the load" in capsys.readouterr().out
+    assert np.all(np.load(tmp_path / "b" / "basins.npz")["config"] >= 0)

@@ -18,7 +18,10 @@ def register(sub):
     b.add_argument("--x-range", default=None, help="LO:HI deformation interval to search for wells (default: the "
                    "stable roots of the model's restoring polynomial, within the training data range when the file "
                    "records it)")
-    b.add_argument("--settle-time", type=positive_float, default=10.0, help="free time after the load, s (default 10)")
+    b.add_argument("--settle-time", type=positive_float, default=None,
+                   help="free time after the load before the final state is judged, s (default: the model's own, "
+                        "the time its slowest free vibration about its wells takes to decay a thousandfold, at "
+                        "least 10 s; 10 s for a model whose free motion does not decay)")
     b.add_argument("--load", choices=["tip", "base"], default="tip",
                    help="tip: force A sin(2 pi f t) on the last mass (Eq. 25, default); base: the same half-sine "
                    "as base acceleration (A in m/s^2)")
@@ -244,6 +247,14 @@ def run(args) -> int:
     model = gmr.load_model(args.model)
     wells, how = find_wells(model, args.x_range, args.model)
     x0 = start_configuration(args.start, wells)
+    if args.settle_time is None:
+        from .._basins._settle import model_settle_time
+
+        need = model_settle_time(model, wells)
+        args.settle_time = 10.0 if need is None else need
+        print(f"gmr basins: settle time {args.settle_time:g} s after the load ("
+              + ("the model's slowest free vibration about its wells decays a thousandfold in it"
+                 if need is not None else "its free motion about its wells does not decay") + "; --settle-time to change)")
     settings = gmr.SweepSettings(settle_time=args.settle_time, load=args.load, batching=args.batching,
                                  solver=getattr(dfx, args.solver.capitalize())(),  # tsit5 -> diffrax.Tsit5
                                  integrator=gmr.Integrator(rtol=args.rtol, atol=args.atol, max_steps=100_000))
