@@ -1,11 +1,11 @@
-"""`basin_map` against a hand-written numba Dormand-Prince sweep (issue 17), same grids, one run.
+"""`basin_map` against a hand-written numba Dormand-Prince sweep, same grids, one run.
 
 The peer (`numba_peer.py`): scalar DOPRI5 with FSAL and an integral controller, stop and restart
 at the switch-off time, the right-hand side generated from the model with every coefficient a
 literal, `prange` over the points (all cores). gmr_jax: `basin_map` with each batching
-("native": the C kernel generated from the model, what "auto" picks on a CPU; "lanes": the same
-per-point step control in a vectorised XLA loop; "joint": one step size per chunk), all CPU
-cores (threads for native, JAX devices for the others). Both integrate the same chain (`bench_basins`'s: cells
+("lanes", the default: diffrax's `Tsit5.step` and `PIDController` per point in lanes fed from a
+queue; "native": the opt-in C kernel generated from the model; "joint", with `--batchings`: one
+step size per chunk), all CPU cores (threads for native, JAX devices for the others). Both integrate the same chain (`bench_basins`'s: cells
 k1 x + k3 x^3 + c v, wells at +-3 cm, graded stiffness, 50 g masses) under the Eq. (25) tip
 half-sine, settle 10 s, rtol 1e-6 / atol 1e-8, over a 100 x 100 (f, A) grid (f 0.1-5 Hz,
 A 0.02-0.6 N), and their final states go through the same classification (`basin_map`'s).
@@ -17,7 +17,7 @@ steps per point (attempts, accepted and rejected), cost per trajectory-step per 
 agreement. The end-to-end part times `gmr basins` in fresh processes (cold: empty compilation
 cache; warm: the second process, cache filled) against the numba script end to end.
 
-    python benchmarks/bench_basins_numba.py              # ~6 min on 2 cores
+    python benchmarks/bench_basins_numba.py              # ~5 min on 2 cores
     python benchmarks/bench_basins_numba.py --quick      # 3 cells only, 40 x 25 grid
     taskset -c 0,1 python benchmarks/bench_basins_numba.py   # 2 pinned cores of a larger machine
 
@@ -41,6 +41,7 @@ import numpy as np  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parent))  # this checkout's gmr_jax
 
 import gmr_jax as g  # noqa: E402
 
@@ -175,7 +176,7 @@ def main():
     ap.add_argument("--cells", type=int, nargs="*", default=None)
     ap.add_argument("--dampings", type=float, nargs="*", default=[1.0, 0.3])
     ap.add_argument("--reps", type=int, default=3)
-    ap.add_argument("--batchings", nargs="*", default=["native", "lanes", "joint"])
+    ap.add_argument("--batchings", nargs="*", default=["lanes", "native"])
     ap.add_argument("--lanes", type=int, nargs="*", default=[None],
                     help="lane counts to try for the lanes batching (default: basin_map's own)")
     ap.add_argument("--unrolls", type=int, nargs="*", default=[None],
@@ -205,8 +206,8 @@ def main():
                 bm = r["bm"]
                 steps = float(np.mean(np.asarray(bm.steps)))
                 assert r["stats"]["batching"] == batching, r["stats"]
-                label = f"basin_map ({batching}" + (f", {r['stats']['chunk']} lanes" if batching in ("lanes", "native")
-                                                    else "")
+                label = (f"basin_map ({'default: diffrax ' + r['stats']['solver'] + ' ' if batching == 'lanes' else ''}"
+                         f"{batching}" + (f", {r['stats']['chunk']} lanes" if batching in ("lanes", "native") else ""))
                 label += (f", {unroll} attempts/pass" if unroll is not None else "") + ")"
                 m = row(label, r, steps, n_points, peer["run"])
                 m["agreement"] = float(np.mean(np.asarray(bm.config).ravel() == cfg_peer))

@@ -1,4 +1,4 @@
-"""Work per point of the lanes sweep with each Runge-Kutta pair (issue 17, "a higher-order pair").
+"""Work per point of the lanes sweep (diffrax's solver step per lane) with each Runge-Kutta pair.
 
 Same chains, input and grid as `bench_basins_numba.py` (cells k1 x + k3 x^3 + c v, Eq. (25) tip
 half-sine, settle 10 s, rtol 1e-6 / atol 1e-8, 100 x 100 (f, A) grid), `basin_map` with
@@ -23,6 +23,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parent))  # this checkout's gmr_jax
 
 import gmr_jax as g  # noqa: E402
 

@@ -3,6 +3,7 @@ that verification confirms, result codes and input errors."""
 
 import json
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -65,6 +66,7 @@ def test_actuate_reaches_target_and_beats_grid():
     assert sol.result == RESULTS.successful
     assert act.kind == "half_sine" and act.peak == act.A
     assert st["verified_config"] == 3 and st["verified_wells"] == [1, 1] and st["basin_map_config"] == 3
+    assert st["verified_result"] == "successful"
     assert st["solves"] == st["forward_solves"] + 2 * st["gradient_evaluations"] + st["verify_solves"]
     assert st["gradient_evaluations"] > 0
     # independent check: plain simulation of the exact model, classified as basin_map does
@@ -196,6 +198,13 @@ def test_cli_actuate_tries_the_design_on_models_drawn_from_the_covariance(tmp_pa
     assert rob["robust_A"] is not None and a <= rob["robust_A"] <= 1.2 * a, rob
     assert rob["ladder"][0][:2] == [1.0, a] and rob["ladder"][0][2] == rob["share_at_design"]
     assert "models drawn from the file's covariance" in rob["sentence"]
+    # the draws still moving at t1 are told apart from those that end in another configuration
+    assert rob["share_at_design"] + rob["unsettled_at_design"] + rob["elsewhere_at_design"] == pytest.approx(1.0)
+    # without --settle-time: the model's own (7 / sigma = 47 s), said, and used by the robustness check too
+    assert main(["actuate", str(tmp_path / "cov.json"), "--out", str(tmp_path / "auto"),
+                 *[a for a in args if a not in ("--settle-time", "30")]]) == 0
+    auto = json.loads((tmp_path / "auto" / "actuation.json").read_text())["robustness"]
+    assert auto["settle_time"] == 47.0 and auto["unsettled_at_design"] == 0.0
     plain = json.loads((tmp_path / "plain" / "actuation.json").read_text())["robustness"]
     assert plain["draws"] == 0 and "no covariance" in plain["sentence"]
     # --require-robust: exit status 3 where the design is reached but not robust, or its robustness cannot be said
@@ -206,3 +215,29 @@ def test_cli_actuate_tries_the_design_on_models_drawn_from_the_covariance(tmp_pa
     assert main(["actuate", str(tmp_path / "plain.json"), "--out", str(tmp_path / "plain_r"), *args,
                  "--require-robust"]) == 3
     assert (tmp_path / "plain_r" / "actuation.json").exists()  # written either way
+
+
+def test_settle_time_comes_from_the_model_and_unsettled_draws_are_told_apart():
+    """The settle time every classifying command uses by default is the model's own: 7 / sigma, sigma the slowest
+    linearised decay rate about its wells (here c / 2m), rounded up, at least 10 s; an undamped model has none.
+    Drawn models still moving at t1 are counted apart (`BasinProbability.unsettled`), not as 'ended elsewhere'."""
+    from gmr_jax._basins._settle import model_settle_time
+
+    terms = [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -2.0},
+             {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 2.0},
+             {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.3}]
+    cov = [{"dof": 0, "terms": [["stiffness", 1], ["stiffness", 3], ["velocity_damping", 1]],
+            "matrix": np.diag([0.01**2, 0.01**2, 0.003**2]).tolist()}]
+    m = g.from_terms([1.0], terms, topology="chain", covariance=cov)
+    wells = g.stable_wells(m, (-2, 2))
+    assert model_settle_time(m, wells) == 47.0  # 7 / (0.3 / 2) = 46.7 s, rounded up to two digits
+    assert model_settle_time(g.from_terms([1.0], terms[:2], topology="chain"), wells) is None
+    f, A = np.array([0.2]), np.array([0.5, 1.0, 2.0])
+    short = g.basin_probability(m, f, A, jax.random.key(0), 8, x_range=(-2, 2),
+                                settings=g.SweepSettings(settle_time=2.0)).value
+    lost = np.asarray(short.probability)[..., list(np.asarray(short.configs)).index(-1)]
+    unsettled = np.asarray(short.unsettled)
+    assert np.all(unsettled > 0) and np.allclose(unsettled, lost)  # none failed: every -1 is an unsettled draw
+    long = g.basin_probability(m, f, A, jax.random.key(0), 8, x_range=(-2, 2),
+                               settings=g.SweepSettings(settle_time=model_settle_time(m, wells))).value
+    assert np.all(np.asarray(long.unsettled) == 0) and -1 not in np.asarray(long.configs).tolist()

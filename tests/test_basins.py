@@ -1,3 +1,4 @@
+import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -291,7 +292,9 @@ def test_lanes_match_member_and_a_tight_reference_with_per_point_steps():
 @pytest.mark.parametrize("topology", ["chain", "independent"])
 @pytest.mark.parametrize("load", ["tip", "base"])
 def test_lane_field_matches_the_model_equations(topology, load):
-    from gmr_jax._basins._lanes import lane_field
+    """The lanes' field (lanes on the last axis, one model or each lane its own) is the model's
+    equations of motion lane by lane."""
+    from gmr_jax._basins._lanes import lanes_field
 
     terms = [{"dof": i, "physics": p, "order": o, "coefficient": c}
              for i in range(3) for p, o, c in (("stiffness", 1, -20.0 - i), ("stiffness", 3, 3e4), ("stiffness", 2, 7.0),
@@ -302,12 +305,25 @@ def test_lane_field_matches_the_model_equations(topology, load):
     x, v = jnp.asarray(rng.normal(0, 0.03, (3, 16))), jnp.asarray(rng.normal(0, 0.5, (3, 16)))
     t, f, a = (jnp.asarray(rng.uniform(0.01, 0.3, 16)), jnp.asarray(rng.uniform(0.5, 3, 16)),
                jnp.asarray(rng.uniform(0.1, 2, 16)))
-    got = lane_field(m, load, 3, jnp.float64)(t, x, v, f, a, 0.5 / f)
     src = HalfSineTip if load == "tip" else HalfSineBase
-    want = jax.vmap(lambda xi, vi, ti, fi, ai: m.accelerations(xi, vi, *src(fi, ai, n_dof=3)(ti)), in_axes=(1, 1, 0, 0, 0),
-                    out_axes=1)(x, v, t, f, a)
-    np.testing.assert_allclose(np.asarray(got[3:]), np.asarray(want), rtol=1e-12, atol=1e-9)
-    np.testing.assert_array_equal(np.asarray(got[:3]), np.asarray(v))
+
+    def want(model):
+        return jax.vmap(lambda xi, vi, ti, fi, ai: model.accelerations(xi, vi, *src(fi, ai, n_dof=3)(ti)),
+                        in_axes=(1, 1, 0, 0, 0), out_axes=1)(x, v, t, f, a)
+
+    with jax.numpy_rank_promotion("allow"):
+        got = lanes_field(m, load, 3, per_lane=False)(t, (x, v), (m, f, a, 0.5 / f))
+    np.testing.assert_allclose(np.asarray(got[1]), np.asarray(want(m)), rtol=1e-12, atol=1e-9)
+    np.testing.assert_array_equal(np.asarray(got[0]), np.asarray(v))
+    # each lane its own coefficients (a drawn ensemble): lane k follows model k
+    scale = jnp.asarray(rng.uniform(0.8, 1.2, 16))
+    models = jax.vmap(lambda s: eqx.tree_at(lambda q: (q.stiffness, q.masses), m, (m.stiffness * s, m.masses * s)))(scale)
+    lanes = jax.tree.map(lambda q: jnp.moveaxis(q, 0, -1), models)
+    with jax.numpy_rank_promotion("allow"):
+        got = lanes_field(m, load, 3, per_lane=True)(t, (x, v), (lanes, f, a, 0.5 / f))
+    for k in (0, 7, 15):
+        mk = jax.tree.map(lambda q: q[k], models)
+        np.testing.assert_allclose(np.asarray(got[1][:, k]), np.asarray(want(mk))[:, k], rtol=1e-12, atol=1e-9)
 
 
 def test_lane_half_period_sin_is_sin_on_the_load_phase():
@@ -347,17 +363,38 @@ def test_lanes_step_budget_is_per_point(batching):
 
 
 @pytest.mark.parametrize("batching", ["lanes", "native"])
-@pytest.mark.parametrize("solver", ["dopri5", "dopri8"])
+@pytest.mark.parametrize("solver", [dfx.Dopri5(), dfx.Dopri8(), "dopri8"])
 def test_lanes_other_pairs_give_the_same_map(solver, batching):
     if batching == "native":
         _needs_compiler()
     m = chain()
     wells = stable_wells(m, [[-0.05, 0.05]] * 2)
     f, A = _grid()
-    ref = basin_map(m, f, A, wells, settings=SweepSettings(batching="lanes")).value
+    ref = basin_map(m, f, A, wells, settings=SweepSettings(batching=batching)).value
     other = basin_map(m, f, A, wells, settings=SweepSettings(solver=solver, batching=batching)).value
     assert np.array_equal(np.asarray(other.config), np.asarray(ref.config))
     np.testing.assert_allclose(np.asarray(other.x_final), np.asarray(ref.x_final), atol=2e-4)
+
+
+def test_default_sweep_runs_the_diffrax_solver_it_is_given():
+    """The default path integrates with the diffrax solver object of `SweepSettings.solver`:
+    Dopri8 instead of Tsit5 takes fewer steps per point (an 8th-order pair) and gives the same
+    map; an implicit solver (Kvaerno5, vmapped lane by lane) gives it too."""
+    m = chain()
+    wells = stable_wells(m, [[-0.05, 0.05]] * 2)
+    f, A = _grid()
+    tsit = basin_map(m, f, A, wells)
+    assert tsit.stats["batching"] == "lanes" and tsit.stats["solver"] == "Tsit5"
+    dop8 = basin_map(m, f, A, wells, settings=SweepSettings(solver=dfx.Dopri8()))
+    assert dop8.stats["solver"] == "Dopri8"
+    np.testing.assert_array_equal(np.asarray(dop8.value.config), np.asarray(tsit.value.config))
+    s_t, s_8 = np.asarray(tsit.value.steps, float), np.asarray(dop8.value.steps, float)
+    assert s_8.mean() < 0.8 * s_t.mean()
+    assert np.mean(s_8 < s_t) > 0.9  # point by point, not only on average
+    kv = basin_map(m, f[::2], A[::2], wells, settings=SweepSettings(solver=dfx.Kvaerno5()))
+    np.testing.assert_array_equal(np.asarray(kv.value.config), np.asarray(tsit.value.config)[::2, ::2])
+    with pytest.raises(g.GMRInputError, match="adaptive diffrax solver"):
+        SweepSettings(solver=dfx.Euler())
 
 
 def test_float32_sweep_agrees_with_float64():
@@ -366,7 +403,7 @@ def test_float32_sweep_agrees_with_float64():
     f, A = _grid()
     ref = basin_map(m, f, A, wells).value
     lo_sol = basin_map(m, f, A, wells, settings=SweepSettings(precision="float32"))
-    assert lo_sol.stats["batching"] == "lanes"  # "auto": the native kernel is float64 only
+    assert lo_sol.stats["batching"] == "lanes"
     lo = lo_sol.value
     assert lo.x_final.dtype == jnp.float32
     assert np.array_equal(np.asarray(lo.config), np.asarray(ref.config))
@@ -404,8 +441,10 @@ def test_coulomb_friction_is_smoothed_below_the_settled_speed_and_said(batching)
     span = float(np.min(np.nanmax(wells, 1) - np.nanmin(wells, 1)))
     assert auto.stats["sign_eps"] == pytest.approx(0.1 * 0.05 * span)
     assert auto.stats["counts"] == {"successful": 20}
-    finer = basin_map(m, f, A, wells, settings=SweepSettings(batching=batching,
-                                                             sign_eps=auto.stats["sign_eps"] / 10))
+    # ten times smaller eps: ten times stiffer near v = 0, about 1e5 steps a point (budget raised)
+    finer = basin_map(m, f, A, wells, settings=SweepSettings(
+        batching=batching, sign_eps=auto.stats["sign_eps"] / 10,
+        integrator=g.Integrator(rtol=1e-6, atol=1e-8, max_steps=400_000)))
     np.testing.assert_array_equal(np.asarray(auto.value.config), np.asarray(finer.value.config))
     assert len(set(np.asarray(auto.value.config).ravel().tolist())) >= 2
     # a model without sgn(v) is not touched
@@ -531,3 +570,108 @@ def test_cli_basins_notes_crossings_faster_than_the_recorded_speeds(tmp_path):
         if noted:
             assert "at least 0.707" in note and "14.1 x the fastest recorded (0.05" in note
     assert json.loads(path.read_text()).get("speed_range") is None
+
+
+def test_basin_probability_sweeps_the_drawn_models_as_one_batch_with_the_loops_answer():
+    """The drawn models are data in one lanes sweep: each (model, point) pair ends as that model's
+    own `basin_map` does point by point, so the probabilities are those of the per-draw loop."""
+    terms = []
+    for i, (k1, k3) in enumerate([(-30.0, 1e5), (-60.0, 2e5)]):
+        terms += [{"dof": i, "physics": "stiffness", "order": 1, "coefficient": k1},
+                  {"dof": i, "physics": "stiffness", "order": 3, "coefficient": k3},
+                  {"dof": i, "physics": "velocity_damping", "order": 1, "coefficient": 0.5}]
+    cov = [{"dof": i, "terms": [["stiffness", 1], ["stiffness", 3]], "matrix": np.diag([4.0, 1e8]).tolist()}
+           for i in range(2)]
+    m = g.from_terms([0.05, 0.05], terms, "chain", covariance=cov)
+    f, A = _grid()
+    x_range = [[-0.05, 0.05]] * 2
+    key = jax.random.key(3)
+    sol = g.basin_probability(m, f, A, key, 5, x_range=x_range)
+    bp = sol.value
+    assert sol.stats["samples_used"] == 5 and sol.stats["samples_drawn"] == 5
+    samples = g.sample_models(m, key, 5)
+    configs = []
+    for k in range(5):
+        mk = jax.tree.map(lambda a: a[k] if eqx.is_array(a) else a, samples)
+        configs.append(np.asarray(basin_map(mk, f, A, stable_wells(mk, x_range)).value.config))
+    stack = np.stack(configs)
+    assert len(np.unique(stack)) >= 2 and np.any(np.ptp(stack, axis=0) > 0)  # the draws disagree somewhere
+    want = np.stack([np.mean(stack == c, axis=0) for c in np.asarray(bp.configs)], axis=-1)
+    np.testing.assert_array_equal(np.asarray(bp.probability), want)
+    np.testing.assert_array_equal(np.asarray(bp.mean_config),
+                                  np.asarray(basin_map(m, f, A, stable_wells(m, x_range)).value.config))
+
+
+# -- traceable: jit, vmap over models, gradients with respect to the load ----------------------
+def test_basin_map_is_a_pure_function_under_jit_and_vmap():
+    """With the wells and settings fixed, `basin_map` jits (new grid values reuse the program) and
+    vmaps over stacked models, with the eager map's answer."""
+    import functools
+
+    m = chain()
+    wells = stable_wells(m, [[-0.05, 0.05]] * 2)
+    f, A = _grid()
+    eager = basin_map(m, f, A, wells).value
+    run = jax.jit(functools.partial(basin_map, wells=wells, settings=SweepSettings()))
+    sol = run(m, f, A)
+    np.testing.assert_array_equal(np.asarray(sol.value.config), np.asarray(eager.config))
+    np.testing.assert_array_equal(np.asarray(sol.value.result), np.asarray(eager.result))
+    np.testing.assert_allclose(np.asarray(sol.value.x_final), np.asarray(eager.x_final), atol=1e-5)
+    # (the points in another order among the lanes: rounding may flip an accept near err = 1)
+    assert int(sol.stats["num_steps"]) == pytest.approx(int(np.sum(np.asarray(eager.steps))), rel=0.01)
+    run(m, f * 1.01, A * 0.99)
+    assert run._cache_size() == 1  # new grid values: the same program
+    # vmap over models (coefficients as data): each one's own map
+    scales = jnp.asarray([0.9, 1.0, 1.15])
+    models = jax.vmap(lambda s: eqx.tree_at(lambda q: q.stiffness, m, m.stiffness * s))(scales)
+    configs = jax.vmap(lambda mk: basin_map(mk, f, A, wells).value.config)(models)
+    for k, s in enumerate(scales):
+        mk = eqx.tree_at(lambda q: q.stiffness, m, m.stiffness * s)
+        np.testing.assert_array_equal(np.asarray(configs[k]), np.asarray(basin_map(mk, f, A, wells).value.config))
+    with pytest.raises(g.GMRInputError, match="wells and the settings fixed"):
+        jax.jit(lambda w: basin_map(m, f, A, w).value.config)(jnp.asarray(wells))
+
+
+def test_gradient_of_the_final_miss_matches_central_differences():
+    """`BasinMap.miss` (how far each point ended from a target configuration, smooth in the final
+    state) differentiated with respect to the load's frequencies and amplitudes through the sweep
+    agrees with central differences of the eager map, point by point (a short settle time: the
+    state still moves at t1, so the derivatives are O(1))."""
+    m = chain()
+    wells = stable_wells(m, [[-0.05, 0.05]] * 2)
+    st = SweepSettings(settle_time=0.5, integrator=g.Integrator(rtol=1e-11, atol=1e-13, max_steps=100_000))
+
+    def miss(f, A):
+        return basin_map(m, f, A, wells, settings=st).value.miss(wells, [1, 1])
+
+    f0, a0 = jnp.asarray([0.7, 1.3, 2.0]), jnp.asarray([0.9, 1.6])
+    gf, ga = jax.grad(lambda f, A: jnp.sum(miss(f, A)), argnums=(0, 1))(f0, a0)
+    h = 1e-5
+    cf = np.array([np.sum(miss(f0.at[i].add(h), a0) - miss(f0.at[i].add(-h), a0)) / (2 * h) for i in range(3)])
+    ca = np.array([np.sum(miss(f0, a0.at[i].add(h)) - miss(f0, a0.at[i].add(-h))) / (2 * h) for i in range(2)])
+    assert np.all(np.abs(cf) > 1e-3) and np.all(np.abs(ca) > 1e-3)  # not a trivially flat quantity
+    np.testing.assert_allclose(np.asarray(gf), cf, rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(ga), ca, rtol=1e-5)
+    # forward mode too, and the eager value is the traced one
+    val, tan = jax.jvp(miss, (f0, a0), (jnp.zeros(3), jnp.ones(2)))
+    np.testing.assert_allclose(np.asarray(val), np.asarray(miss(f0, a0)), rtol=1e-9)
+    np.testing.assert_allclose(np.asarray(tan).sum(), ca.sum(), rtol=1e-5)
+
+
+def test_cli_basins_settles_by_the_models_own_time_by_default(tmp_path, capsys):
+    """Without --settle-time, `gmr basins` judges final states after the model's own settle time
+    (7 / its slowest linearised decay rate, here 47 s), said in its output: a lightly damped
+    model that 10 s leaves moving is classified everywhere."""
+    from gmr_jax._cli._main import main
+
+    terms = [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": -2.0},
+             {"dof": 0, "physics": "stiffness", "order": 3, "coefficient": 2.0},
+             {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": 0.3}]
+    g.save_model(g.from_terms([1.0], terms, topology="chain"), tmp_path / "m.json")
+    grid = ["--f", "0.05:0.5:3", "--A", "0.5:2:3"]
+    assert main(["basins", str(tmp_path / "m.json"), *grid, "--settle-time", "10", "--out", str(tmp_path / "a")]) == 0
+    assert np.any(np.load(tmp_path / "a" / "basins.npz")["result"] == g.RESULTS.not_settled._value)
+    capsys.readouterr()
+    assert main(["basins", str(tmp_path / "m.json"), *grid, "--out", str(tmp_path / "b")]) == 0
+    assert "settle time 47 s after the load" in capsys.readouterr().out
+    assert np.all(np.load(tmp_path / "b" / "basins.npz")["config"] >= 0)

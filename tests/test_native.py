@@ -70,9 +70,9 @@ def _grid():
 @pytest.mark.parametrize("topology", ["chain", "independent"])
 @pytest.mark.parametrize("load", ["tip", "base"])
 def test_native_equals_the_lanes_path_point_by_point(topology, load):
-    """Same algorithm, so the same final states (to rounding), codes, maps and step counts
-    (within a few: XLA and the C compiler round differently, and a rounding difference can flip
-    one accept near err = 1, most often while a lightly damped point settles)."""
+    """The same pair and tolerances; the kernel's integral controller may shrink an accepted step
+    where diffrax's PIDController keeps it, so step counts differ by a few per cent and final
+    states to well inside the tolerance: the same maps and codes."""
     m = chain(topology=topology)
     wells = stable_wells(m, [[-0.05, 0.05]] * 3)
     f, A = _grid()
@@ -85,9 +85,9 @@ def test_native_equals_the_lanes_path_point_by_point(topology, load):
     assert len(set(np.asarray(nv.config).ravel().tolist())) >= 2  # the grid reaches several configurations
     np.testing.assert_array_equal(np.asarray(nv.config), np.asarray(lv.config))
     np.testing.assert_array_equal(np.asarray(nv.result), np.asarray(lv.result))
-    np.testing.assert_allclose(np.asarray(nv.x_final), np.asarray(lv.x_final), atol=1e-7)
+    np.testing.assert_allclose(np.asarray(nv.x_final), np.asarray(lv.x_final), atol=1e-6)
     ns, ls = np.asarray(nv.steps), np.asarray(lv.steps)
-    assert np.all(np.abs(ns - ls) <= 0.05 * ls + 3) and abs(ns.mean() / ls.mean() - 1) < 0.01
+    assert np.all(np.abs(ns - ls) <= 0.15 * ls + 3) and abs(ns.mean() / ls.mean() - 1) < 0.08
 
 
 def test_native_final_states_agree_with_scipy():
@@ -147,33 +147,34 @@ def test_diverged_and_step_budget_are_flagged_like_lanes():
     assert int(bm.result[0, 0]) == g.RESULTS.diverged._value and int(bm.config[0, 0]) == -1
 
 
-def test_auto_picks_native_and_falls_back(monkeypatch):
-    m = chain()
-    wells = stable_wells(m, [[-0.05, 0.05]] * 3)
-    sol = basin_map(m, [1.0], [1.0], wells)
-    assert sol.stats["batching"] == "native" and sol.stats["threads"] == _native.threads()
+def test_native_is_opt_in_and_says_why_it_cannot_run(monkeypatch):
+    import diffrax as dfx
     import jax
 
-    assert basin_map(m, [1.0], [1.0], wells, devices=jax.devices()[:1]).stats["threads"] == 1  # one per device given
-    # float32 takes the lanes path (the kernel is float64)
-    assert basin_map(m, [1.0], [1.0], wells, settings=SweepSettings(precision="float32")).stats["batching"] == "lanes"
+    m = chain()
+    wells = stable_wells(m, [[-0.05, 0.05]] * 3)
+    assert basin_map(m, [1.0], [1.0], wells).stats["batching"] == "lanes"  # the default on every device
+    native = SweepSettings(batching="native")
+    sol = basin_map(m, [1.0], [1.0], wells, settings=native)
+    assert sol.stats["batching"] == "native" and sol.stats["threads"] == _native.threads()
+    assert basin_map(m, [1.0], [1.0], wells, settings=native, devices=jax.devices()[:1]).stats["threads"] == 1
     with pytest.raises(g.GMRInputError, match="native.*float64"):
         basin_map(m, [1.0], [1.0], wells, settings=SweepSettings(batching="native", precision="float32"))
+    with pytest.raises(g.GMRInputError, match="Kvaerno5"):
+        basin_map(m, [1.0], [1.0], wells, settings=SweepSettings(batching="native", solver=dfx.Kvaerno5()))
     monkeypatch.setenv("GMR_NATIVE", "0")
-    assert basin_map(m, [1.0], [1.0], wells).stats["batching"] == "lanes"
     with pytest.raises(g.GMRInputError, match="GMR_NATIVE"):
-        basin_map(m, [1.0], [1.0], wells, settings=SweepSettings(batching="native"))
+        basin_map(m, [1.0], [1.0], wells, settings=native)
 
 
-def test_a_compiler_that_fails_falls_back_with_a_warning(monkeypatch, tmp_path):
+def test_a_compiler_that_fails_is_named_and_the_default_does_not_need_one(monkeypatch, tmp_path):
     monkeypatch.setenv("CC", "false")
     monkeypatch.setenv("GMR_CACHE_DIR", str(tmp_path))  # no kernel already on disk
     monkeypatch.setattr(_native, "_loaded", {})
     monkeypatch.setattr(_native, "_by_structure", {})
     m = chain(damping=0.37)
     wells = stable_wells(m, [[-0.05, 0.05]] * 3)
-    with pytest.warns(RuntimeWarning, match="did not build"):
-        sol = basin_map(m, [1.0], [1.0], wells, settings=SweepSettings(solver="dopri5"))
+    sol = basin_map(m, [1.0], [1.0], wells, settings=SweepSettings(solver="dopri5"))
     assert sol.stats["batching"] == "lanes"
     with pytest.raises(g.GMRInputError, match="did not build"):
         basin_map(m, [1.0], [1.0], wells, settings=SweepSettings(solver="dopri5", batching="native"))
@@ -193,4 +194,4 @@ def test_a_compiler_without_the_tuned_flags_builds_the_portable_kernel(monkeypat
     assert len(list((tmp_path / "gmr_native").glob("*.so"))) == 1
     lan = basin_map(m, f, A, wells, settings=SweepSettings(batching="lanes")).value
     np.testing.assert_array_equal(np.asarray(nat.config), np.asarray(lan.config))
-    np.testing.assert_allclose(np.asarray(nat.x_final), np.asarray(lan.x_final), atol=1e-7)
+    np.testing.assert_allclose(np.asarray(nat.x_final), np.asarray(lan.x_final), atol=1e-6)

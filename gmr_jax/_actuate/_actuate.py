@@ -39,7 +39,7 @@ import numpy as np
 
 from .._config import relieve_map_pressure
 from .._errors import GMRInputError
-from .._solution import RESULTS, Solution, raise_if_failed
+from .._solution import RESULTS, Solution, code_name, raise_if_failed
 from .._basins._sweep import SweepSettings, _final_state, basin_map, classify
 from .._basins._wells import stable_wells
 from .._model._model import AbstractMechanicalModel
@@ -393,8 +393,8 @@ def _verify(prob: _Problem, act: Actuation):
     prob.counts["verify"] += 1
     span, _ = _geometry(prob.wells)
     x1, v1 = sol.value[0][-1], sol.value[1][-1]
-    idx, config, _ = classify(x1, v1, sol.result._value, prob.wells, span, s.sweep)
-    return np.asarray(idx), int(config), np.asarray(x1)
+    idx, config, code = classify(x1, v1, sol.result._value, prob.wells, span, s.sweep)
+    return np.asarray(idx), int(config), np.asarray(x1), code_name(int(code))
 
 
 def _half_sine(prob: _Problem):
@@ -427,7 +427,7 @@ def _half_sine(prob: _Problem):
 
 
 def _finish(prob: _Problem, act: Actuation, verified, extra: dict, code):
-    idx, config, x1 = verified if verified is not None else (None, -1, None)
+    idx, config, x1, how = verified if verified is not None else (None, -1, None, None)
     c = prob.counts
     stats = {
         "forward_solves": c["forward"], "gradient_evaluations": c["gradient"], "verify_solves": c["verify"],
@@ -435,6 +435,8 @@ def _finish(prob: _Problem, act: Actuation, verified, extra: dict, code):
         "solves": c["forward"] + 2 * c["gradient"] + c["verify"],
         "verified_wells": None if idx is None else idx.tolist(),
         "verified_config": config, "target_config": prob.config,
+        # "not_settled": the verifying simulation was still moving at t1 (a longer settle time decides it)
+        "verified_result": how,
         "x_final": None if x1 is None else x1.tolist(),
         **extra,
     }
@@ -479,7 +481,10 @@ def actuate(
     **Returns:** a `Solution` whose `value` is an `Actuation` (kind, parameters, peak, effort),
     `result` an `RESULTS` code (`target_not_found`: no seed reached it; `not_verified`:
     the exact-model simulation ended elsewhere), and `stats`: solve counts (`solves` counts an
-    adjoint solve as one), the verifying simulation's wells and configuration, the candidates.
+    adjoint solve as one), the verifying simulation's wells and configuration and its code
+    (`verified_result`: "not_settled" when it was still moving `settings.sweep.settle_time`
+    after the load, apart from ending in another configuration), the candidates. The settle
+    time is `settings.sweep`'s; `gmr actuate` takes the model's own (7 / its slowest decay rate).
 
     Raises `GMRInputError` for a malformed target, a cell that is not bistable, or a target equal
     to the start.

@@ -1,9 +1,10 @@
 """A sweep's points integrated by a C kernel generated from the model ("native" batching, CPU).
 
-The algorithm is the lanes one (`_lanes`): the same Runge-Kutta pair and tableau, the same
-integral controller, stop at the switch-off time, divergence box and result codes, so a point's
-trajectory is the same step for step up to rounding (the C compiler and XLA round differently:
-final states agree to about 1e-9, step counts within a few). What differs is where it runs. XLA:CPU runs each stage of
+The algorithm is the lanes one (`_lanes`): the same Runge-Kutta pair and tableau (diffrax's
+Tsit5, Dopri5 or Dopri8), stop at the switch-off time, divergence box and result codes, with an
+integral controller of its own (diffrax's `PIDController` with `pcoeff = 0, icoeff = 1`, except
+that an accepted step may also shrink): a point's step count is within a few per cent of the
+lanes path's and its final state well inside the tolerance. What differs is where it runs. XLA:CPU runs each stage of
 a lanes step as separate vectorised loops over the lanes, and the state goes through memory
 between them (`results/README.md`, issue 17); here one C function does whole step attempts
 for a group of `LANES` points held in small arrays that stay in L1: every stage, the error norm
@@ -20,10 +21,9 @@ tolerances or grids reuse the same kernel; a new structure builds a new one (0.7
 for 3-10 cells), kept on disk under the compilation cache folder, keyed by its source, the compiler and
 the machine's CPU flags.
 
-Used by `basin_map` when `SweepSettings.batching` is "auto" (the default) on a CPU for a
-`GlobalModel` on a chain or independent DOFs in float64, and a C compiler is found (`$CC`,
-then cc, gcc, clang); `GMR_NATIVE=0` turns it off. Everything else, and any machine without a
-compiler, takes the lanes path.
+Used by `basin_map` when asked for (`SweepSettings(batching="native")`), on a CPU, for a
+`GlobalModel` on a chain or independent DOFs in float64, in one process, when a C compiler is
+found (`$CC`, then cc, gcc, clang); `GMR_NATIVE=0` turns it off. The default is the lanes path.
 """
 
 import ctypes
@@ -43,7 +43,7 @@ import numpy as np
 from .._model._model import GlobalModel
 from .._solution import RESULTS
 from .._topology import Chain, Independent
-from ._lanes import _COS_TAYLOR, _ORDER, FACTOR_MAX, FACTOR_MIN, SAFETY, _tableau
+from ._lanes import _COS_TAYLOR, _ORDER, FACTOR_MAX, FACTOR_MIN, SAFETY, _tableau, solver_name
 
 # points per group: two AVX-512 registers of float64 (four AVX2 ones). Measured on the 2-core
 # AVX-512 machine, 1e4 points, 3 / 10 cells: 8 lanes 0.059 / 0.168 s, 16 lanes 0.058 / 0.163 s,
@@ -81,9 +81,9 @@ def compiler() -> str | None:
 
 def supports(model, settings) -> bool:
     """Whether the native kernel integrates this model under these settings (float64, a
-    `GlobalModel` on a chain or independent DOFs; every pair of `SweepSettings.solver`)."""
+    `GlobalModel` on a chain or independent DOFs; the explicit pairs Tsit5, Dopri5, Dopri8)."""
     return (isinstance(model, GlobalModel) and isinstance(model.topology, (Chain, Independent))
-            and settings.precision == "float64")
+            and settings.precision == "float64" and solver_name(settings.solver) is not None)
 
 
 def _structure(model) -> dict:
@@ -385,9 +385,10 @@ _by_structure: dict = {}  # (structure, load, pair) -> library: the source is no
 def kernel(model, settings) -> ctypes.CDLL:
     """The built kernel for this model's structure, load and Runge-Kutta pair (`build`)."""
     s = _structure(model)
-    key = repr((s, settings.load, settings.solver, compiler()))
+    pair = solver_name(settings.solver)
+    key = repr((s, settings.load, pair, compiler()))
     if key not in _by_structure:
-        _by_structure[key] = build(kernel_source(s, settings.load, settings.solver, _codes()))
+        _by_structure[key] = build(kernel_source(s, settings.load, pair, _codes()))
     return _by_structure[key]
 
 

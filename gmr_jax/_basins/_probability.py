@@ -14,8 +14,8 @@ from .._coordination._joint import damping_faults, fall_speed
 from .._errors import GMRInputError
 from .._model._model import GlobalModel
 from .._model._uncertainty import sample_models
-from .._solution import RESULTS, Solution
-from ._sweep import SweepSettings, basin_map
+from .._solution import RESULTS, Solution, code_name
+from ._sweep import SweepSettings, _check_inputs, ensemble_configs, friction_smoothing
 from ._wells import stable_wells
 
 
@@ -25,7 +25,9 @@ class BasinProbability(eqx.Module):
     or failed), ascending; `probability` (NA, NF, c): per grid point, the share of the used
     samples that ended in each; `most_likely` (NA, NF): the configuration of highest
     probability; `confidence` (NA, NF): its probability; `mean_config` (NA, NF): the
-    configuration the model itself (the distribution's mean) ends in."""
+    configuration the model itself (the distribution's mean) ends in; `unsettled` (NA, NF): the
+    share of the used samples that had not settled in a well by t1 (`not_settled`: counted in
+    configuration -1 with the ones that failed or diverged; a longer settle time decides them)."""
 
     f: Float[Array, " nf"]
     A: Float[Array, " na"]
@@ -34,6 +36,7 @@ class BasinProbability(eqx.Module):
     most_likely: Int[Array, "na nf"]
     confidence: Float[Array, "na nf"]
     mean_config: Int[Array, "na nf"]
+    unsettled: Float[Array, "na nf"]
 
 
 def feeds_energy(model: GlobalModel, wells: np.ndarray, x_range) -> list[str]:
@@ -81,12 +84,15 @@ def basin_probability(
     **Arguments:**
 
     - `model`: a `GlobalModel` with a covariance (from `reconstruct`).
-    - `f`, `A`, `x0`, `settings`, `chunk`: as `basin_map` (every sample is swept with the same
-      compiled function: coefficients are traced, so the n sweeps compile once).
+    - `f`, `A`, `x0`, `settings`, `chunk`: as `basin_map`. Under "lanes" batching (the default)
+      the models are data: the model and its n samples over the grid are one batch of
+      (n + 1) x NA x NF points through one compiled lanes loop, each lane carrying its point's
+      coefficients and wells; other batchings sweep them one after another.
     - `key`, `n`: the `jax.random` key and the number of samples the probabilities average over.
     - `x_range`: (lo, hi) or (dof, 2), the interval of each DOF in which each sample's stable
       wells are searched (`stable_wells`), e.g. the span of the training data.
-    - `progress`: optional `progress(used, n)` after each draw.
+    - `progress`: optional `progress(used, n)` after each draw (the draws are checked before the
+      one sweep).
     - `max_draws`: at most this many draws (default 8 n) to find the n samples.
 
     **Returns:** a `Solution` whose `value` is a `BasinProbability`. A sample whose number of
@@ -100,8 +106,9 @@ def basin_probability(
     to passive structures with the model's landscape. Draws go on until n samples are used or
     `max_draws` were drawn (`stats["samples_drawn"]`); `stats["samples_used"]` is the number the
     probabilities average over (`result` is `RESULTS.nonfinite` when none is).
-    A point where a sample failed or did not settle counts for configuration -1 (each sweep
-    runs with `throw=False`; `stats["counts"]` sums the sweeps' codes).
+    A point where a sample failed or did not settle counts for configuration -1 (the sweep runs
+    without raising; `stats["counts"]` counts the samples' codes). A Coulomb term is smoothed as
+    in `basin_map`, with the eps of the model's own wells for every sample.
     """
     relieve_map_pressure()  # a long session's compiled programs (`_config.map_pressure`)
     n = int(n)
@@ -112,17 +119,17 @@ def basin_probability(
         raise GMRInputError(f"basin_probability: max_draws must be >= 1, got {max_draws}")
     first = sample_models(model, key, min(n, max_draws))  # refuses a model without a covariance first
     wells0 = stable_wells(model, x_range)
-    mean_map = basin_map(model, f, A, wells0, x0=x0, settings=settings, chunk=chunk, throw=False)
+    f_np, a_np, wells0, x0_np = _check_inputs(model, f, A, wells0, x0)
     n_wells = np.sum(np.isfinite(wells0), axis=1)
-    configs, drawn, other, passive, counts = [], 0, 0, 0, {}
-    batch = 0
-    while len(configs) < n and drawn < max_draws:
+    used, drawn, other, passive, batch = [], 0, 0, 0, 0
+    # the draws are filtered first (host-side: wells and passivity of each), then swept together
+    while len(used) < n and drawn < max_draws:
         # the first n draws are `sample_models(model, key, n)`; more batches, where some were left out
         size = min(n, max_draws - drawn)
         samples = first if batch == 0 else sample_models(model, jax.random.fold_in(key, batch), size)
         batch += 1
         for k in range(size):
-            if len(configs) == n:
+            if len(used) == n:
                 break
             drawn += 1
             m = jax.tree.map(lambda a, k=k: a[k] if eqx.is_array(a) else a, samples)
@@ -132,27 +139,40 @@ def basin_probability(
             elif feeds_energy(m, w, x_range):
                 passive += 1
             else:
-                sol = basin_map(m, f, A, w, x0=x0, settings=settings, chunk=chunk, throw=False)
-                configs.append(np.asarray(sol.value.config))
-                for name, c in sol.stats["counts"].items():
-                    counts[name] = counts.get(name, 0) + c
+                used.append((m, w))
             if progress is not None:
-                progress(len(configs), n)
-    used = len(configs)
-    bm0 = mean_map.value
-    stats = {"samples_used": used, "samples_drawn": drawn, "samples_other_wells": other, "samples_non_dissipative": passive,
-             "mean_non_dissipative": feeds_energy(model, wells0, x_range), "counts": counts}
-    if not configs:
-        shape = np.asarray(bm0.config).shape
-        value = BasinProbability(f=bm0.f, A=bm0.A, configs=jnp.zeros(0, int), probability=jnp.zeros(shape + (0,)),
-                                 most_likely=jnp.full(shape, -1), confidence=jnp.zeros(shape),
-                                 mean_config=bm0.config)
+                progress(len(used), n)
+    # the model itself first, then the used draws: one ensemble, one sweep
+    smooth, _ = friction_smoothing(model, settings, wells0)
+    members = [smooth] + [m for m, _ in used]
+    stack = GlobalModel(masses=jnp.stack([jnp.asarray(m.masses) for m in members]),
+                        stiffness=jnp.stack([jnp.asarray(m.stiffness) for m in members]),
+                        velocity_damping=jnp.stack([jnp.asarray(m.velocity_damping) for m in members]),
+                        position_damping=jnp.stack([jnp.asarray(m.position_damping) for m in members]),
+                        topology=model.topology, sign_eps=smooth.sign_eps)
+    wells_m = np.stack([wells0] + [w for _, w in used])
+    x0s = wells_m[:, :, 0] if x0_np is None else np.broadcast_to(x0_np, wells_m.shape[:2])
+    configs, codes = ensemble_configs(stack, f_np, a_np, wells_m, x0s, settings, chunk=chunk)
+    values_c, counts_c = np.unique(codes[1:], return_counts=True)
+    counts = {code_name(v): int(c) for v, c in zip(values_c, counts_c)}
+    n_used = len(used)
+    mean_config = jnp.asarray(configs[0])
+    fj, aj = jnp.asarray(f_np), jnp.asarray(a_np)
+    stats = {"samples_used": n_used, "samples_drawn": drawn, "samples_other_wells": other,
+             "samples_non_dissipative": passive, "mean_non_dissipative": feeds_energy(model, wells0, x_range),
+             "counts": counts}
+    if not n_used:
+        shape = mean_config.shape
+        value = BasinProbability(f=fj, A=aj, configs=jnp.zeros(0, int), probability=jnp.zeros(shape + (0,)),
+                                 most_likely=jnp.full(shape, -1), confidence=jnp.zeros(shape), mean_config=mean_config,
+                                 unsettled=jnp.zeros(shape))
         return Solution(value=value, result=RESULTS.nonfinite, stats=dict(stats, samples_used=0))
-    stack = np.stack(configs)  # (used, NA, NF)
-    values = np.unique(stack)
-    prob = np.stack([np.mean(stack == c, axis=0) for c in values], axis=-1)
+    stack_c = configs[1:]  # (used, NA, NF)
+    values = np.unique(stack_c)
+    prob = np.stack([np.mean(stack_c == c, axis=0) for c in values], axis=-1)
     best = np.argmax(prob, axis=-1)
-    value = BasinProbability(f=bm0.f, A=bm0.A, configs=jnp.asarray(values),
-                             probability=jnp.asarray(prob), most_likely=jnp.asarray(values[best]),
-                             confidence=jnp.asarray(np.max(prob, axis=-1)), mean_config=bm0.config)
+    value = BasinProbability(f=fj, A=aj, configs=jnp.asarray(values), probability=jnp.asarray(prob),
+                             most_likely=jnp.asarray(values[best]), confidence=jnp.asarray(np.max(prob, axis=-1)),
+                             mean_config=mean_config,
+                             unsettled=jnp.asarray(np.mean(codes[1:] == RESULTS.not_settled._value, axis=0)))
     return Solution(value=value, result=RESULTS.successful, stats=stats)

@@ -1,10 +1,9 @@
-"""Deployment-basin sweeps over actuation grids (paper Fig. 11, load of Eq. 25): on a CPU the
-model's own C kernel (`_native`), else vectorised XLA loops or chunked diffrax solves sharded
-over all devices; every point's result code kept."""
+"""Deployment-basin sweeps over actuation grids (paper Fig. 11, load of Eq. 25): a queue of
+points driven through diffrax's solvers in lanes (`_lanes`) and sharded over all devices, or
+opt-in the model's own C kernel (`_native`); every point's result code kept."""
 
 import dataclasses
 import functools
-import warnings
 from collections.abc import Callable
 
 import diffrax as dfx
@@ -17,15 +16,15 @@ from jax.sharding import PartitionSpec as P
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._config import relieve_map_pressure
-from .._errors import GMRInputError, check_real, describe
+from .._errors import GMRInputError, check_real, describe, is_tracer
 from .._model._model import AbstractMechanicalModel
 from .._simulate._inputs import half_sine
 from .._simulate._integrate import Integrator, integrate, vector_field
 from .._simulate._simulate import has_coulomb
-from .._solution import RESULTS, Solution, as_result, code_name, raise_if_failed, value_of
+from .._solution import RESULTS, Solution, as_result, code_name, error_if_failed, raise_if_failed, value_of
 from . import _native
 from ._joint import joint_final_states
-from ._lanes import SOLVERS as LANE_SOLVERS, lanes_final_states
+from ._lanes import SOLVERS as LANE_SOLVERS, as_solver, lanes_final_states
 
 LOADS = ("tip", "base")
 BATCHINGS = ("auto", "native", "lanes", "joint", "member")
@@ -46,21 +45,27 @@ class SweepSettings(eqx.Module):
       span of each cell's wells) is stopped there and flagged `diverged`.
     - `load`: "tip" (default, Eq. 25: force A sin(2πft) on the last mass for t <= 1/(2f)) or
       "base" (the same half-sine as base acceleration, A in m/s²).
-    - `batching`: "auto" (default): "native" where it applies (a CPU, a `GlobalModel` on a chain
-      or independent DOFs, float64, a C compiler found, one process), else "lanes".
-      "native": the lanes algorithm as a C kernel generated from the model and built with the
-      system's C compiler (`_native`: every stage and the step decision of 16 points at a time
-      in vector registers, all CPU cores through one shared queue; `chunk` and `devices` do not
-      apply); "lanes": per-point step control inside one vectorised XLA loop (`_lanes`):
-      `chunk` lanes step together, each point with its own time, step size and accept/reject
-      decision, and a lane whose point is done takes the next point of the queue (the step
-      count per point is a scalar solver's; no member waits for the slowest); "joint": each
+    - `batching`: "lanes" (default; "auto" is the same): diffrax's `solver.step` and
+      `PIDController` on `chunk` lanes at once inside one loop (`_lanes`), each point with its
+      own time, step size, controller state and accept/reject decision, and a lane whose point
+      is done takes the next point of the queue (the step count per point is one
+      `diffeqsolve`'s; no member waits for the slowest); runs on every device, under `jax.jit`.
+      "native" (opt-in, a CPU accelerator): the same queue as a C kernel generated from the
+      model and built with the system's C compiler (`_native`: every stage and the step decision
+      of 16 points at a time in vector registers, all CPU cores through one shared queue, an
+      integral controller of its own; `chunk` and `devices` do not apply). It needs a C compiler
+      (`$CC`, cc, gcc or clang), a `GlobalModel` on a chain or independent DOFs, float64, one
+      process and an explicit pair (Tsit5, Dopri5, Dopri8); measured 4-7x faster than
+      "lanes" on a CPU (`results/basins_diffrax.md`). "joint": each
       chunk integrated as one ODE with one step size and a max-over-members error norm (every
       member meets the tolerance; see `_joint`), a chunk whose joint solve fails re-run member
       by member; "member": `vmap` of one `diffeqsolve` per point (lockstep: a chunk runs as long
       as its slowest member).
-    - `solver` ("lanes" only): the embedded Runge-Kutta pair, "tsit5" (default), "dopri5" or
-      "dopri8" (diffrax's tableaus); "joint" and "member" use the integrator's Tsit5.
+    - `solver` ("lanes", "native"): the diffrax solver each point is integrated with, as in
+      `diffeqsolve`: `diffrax.Tsit5()` (default), `Dopri5()`, `Dopri8()`, an implicit one such
+      as `Kvaerno5()` for a stiff chain (any adaptive diffrax ODE solver under "lanes"; "native"
+      runs the explicit pairs Tsit5, Dopri5, Dopri8); the names "tsit5", "dopri5", "dopri8" are
+      accepted. "joint" and "member" use the integrator's Tsit5.
     - `attempts_per_pass` ("lanes" only): step attempts per pass of the loop; finished points
       are collected and lanes refilled once per pass (measured on 2 CPU cores: 4 is about 5-10 %
       faster than 1; compile time grows with it).
@@ -82,8 +87,8 @@ class SweepSettings(eqx.Module):
     v_tol: float = 0.05
     box_spans: float = 20.0
     load: str = eqx.field(static=True, default="tip")
-    batching: str = eqx.field(static=True, default="auto")
-    solver: str = eqx.field(static=True, default="tsit5")
+    batching: str = eqx.field(static=True, default="lanes")
+    solver: dfx.AbstractSolver = dfx.Tsit5()
     attempts_per_pass: int = eqx.field(static=True, default=4)
     precision: str = eqx.field(static=True, default="float64")
     sign_eps: float | None = eqx.field(static=True, default=None)
@@ -100,8 +105,13 @@ class SweepSettings(eqx.Module):
         if not isinstance(self.attempts_per_pass, int) or self.attempts_per_pass < 1:
             raise GMRInputError(f"SweepSettings.attempts_per_pass must be an integer >= 1, got "
                                 f"{describe(self.attempts_per_pass)}")
-        if not isinstance(self.solver, str) or self.solver not in SOLVERS:
-            raise GMRInputError(f"SweepSettings.solver must be one of {SOLVERS}, got {describe(self.solver)}")
+        if isinstance(self.solver, str) and self.solver not in SOLVERS:
+            raise GMRInputError(f"SweepSettings.solver must be one of {SOLVERS} or a diffrax solver (e.g. "
+                                f"diffrax.Tsit5()), got {describe(self.solver)}")
+        if not isinstance(self.solver, (str, dfx.AbstractAdaptiveSolver)):
+            raise GMRInputError(f"SweepSettings.solver must be an adaptive diffrax solver with an error estimate "
+                                f"(diffrax.Tsit5(), Dopri5(), Dopri8(), Kvaerno5(), ...), got "
+                                f"{type(self.solver).__name__}")
         check_real(self.settle_time, "SweepSettings.settle_time", lo=0.0, lo_open=True,
                    fix="give the free time after the actuation in seconds, > 0 (e.g. 10.0)")
         check_real(self.x_tol, "SweepSettings.x_tol", lo=0.0, lo_open=True,
@@ -136,6 +146,21 @@ class BasinMap(eqx.Module):
     x_final: Float[Array, "na nf dof"]
     v_final: Float[Array, "na nf dof"]
     steps: Int[Array, "na nf"]
+
+    def miss(self, wells: Float[ArrayLike, "dof max_wells"], target) -> Float[Array, "na nf"]:
+        """How far each point ended from the `target` configuration, a smooth quantity of the
+        final state: mean over cells i of ((x_i - w_i) / s_i)^2 + (v_i / (s_i · 1 s⁻¹))^2, w_i the
+        target's well of cell i, s_i the span of cell i's wells. Zero at rest in the target;
+        differentiable with respect to the grid (`basin_map` under `jax.grad`).
+
+        **Arguments:** `wells` as given to `basin_map`; `target` (dof,) the well index of each
+        cell (e.g. `[0, 1, 1]`).
+        """
+        w = jnp.asarray(wells, self.x_final.dtype)
+        span, _ = _geometry(w)
+        goal = jnp.take_along_axis(w, jnp.asarray(target, int)[:, None], axis=1)[:, 0]
+        goal, span = goal[None, None], span[None, None]
+        return jnp.mean(((self.x_final - goal) / span) ** 2 + (self.v_final / span) ** 2, axis=-1)
 
 
 def _member_final_state(model, settings: SweepSettings, x0, f, a, centre, span):
@@ -173,9 +198,10 @@ def classify(x1, v1, code, wells, span, settings: SweepSettings):
 
 
 def _geometry(wells):
-    span = jnp.nanmax(wells, axis=1) - jnp.nanmin(wells, axis=1)
+    """Span and centre of each cell's wells ((..., dof, max_wells) -> (..., dof))."""
+    span = jnp.nanmax(wells, axis=-1) - jnp.nanmin(wells, axis=-1)
     span = jnp.where(span > 0, span, 1.0)
-    centre = 0.5 * (jnp.nanmax(wells, axis=1) + jnp.nanmin(wells, axis=1))
+    centre = 0.5 * (jnp.nanmax(wells, axis=-1) + jnp.nanmin(wells, axis=-1))
     return span, centre
 
 
@@ -195,19 +221,25 @@ def _chunk(model, settings, x0, wells, fs, amps):
     return idx, config, code, x1, v1, steps
 
 
-def _lanes(model, settings, x0, wells, fs, amps, lanes: int):
-    """Every point of this call through `lanes` lanes with per-point step control (`_lanes`)."""
-    span, centre = _geometry(wells)
-    x1, v1, code, steps = lanes_final_states(model, settings, x0, fs, amps, centre, span, lanes, settings.solver,
-                                             settings.attempts_per_pass)
-    idx, config, code = _classify_all(x1, v1, code, wells, span, settings)
+def _lanes(models, settings, x0s, wells, fs, amps, mids, lanes: int, ensemble: bool):
+    """Every point of this call through `lanes` lanes with per-point step control (`_lanes`);
+    `wells`, `x0s` (M, ...) per model, point k of model `mids[k]` when `ensemble`."""
+    span, centre = _geometry(wells)  # (M, dof)
+    lo, hi = centre - settings.box_spans * span, centre + settings.box_spans * span
+    x1, v1, code, steps = lanes_final_states(models, settings, as_solver(settings.solver), x0s, fs, amps,
+                                             mids if ensemble else None, lo, hi, lanes, settings.attempts_per_pass)
+    if ensemble:
+        idx, config, code = jax.vmap(lambda x, v, c, m: classify(x, v, c, wells[m], span[m], settings))(
+            x1, v1, code, mids)
+    else:
+        idx, config, code = _classify_all(x1, v1, code, wells[0], span[0], settings)
     return idx, config, code, x1, v1, steps
 
 
-def _chunks(model, settings, x0, wells, fs, amps, chunk: int):
+def _chunks(model, settings, x0s, wells, fs, amps, mids, chunk: int, ensemble: bool = False):
     if settings.batching == "lanes":
-        return _lanes(model, settings, x0, wells, fs, amps, chunk)
-    out = jax.lax.map(lambda p: _chunk(model, settings, x0, wells, p[0], p[1]),
+        return _lanes(model, settings, x0s, wells, fs, amps, mids, chunk, ensemble)
+    out = jax.lax.map(lambda p: _chunk(model, settings, x0s[0], wells[0], p[0], p[1]),
                       (fs.reshape(-1, chunk), amps.reshape(-1, chunk)))
     return jax.tree.map(lambda o: o.reshape(-1, *o.shape[2:]), out)
 
@@ -216,18 +248,18 @@ _sweep_points = eqx.filter_jit(_chunks)
 
 
 @functools.lru_cache(maxsize=32)
-def _sharded(devices: tuple, chunk: int):
+def _sharded(devices: tuple, chunk: int, ensemble: bool = False):
     """The points split over `devices` with shard_map; built once per (devices, chunk) so that
     later calls hit the jit cache."""
     mesh = Mesh(np.asarray(devices), ("grid",))
 
     @eqx.filter_jit
-    def run(model, settings, x0, wells, fs, amps):
-        def local(fs, amps):
-            return _chunks(model, settings, x0, wells, fs, amps, chunk)
+    def run(model, settings, x0s, wells, fs, amps, mids):
+        def local(fs, amps, mids):
+            return _chunks(model, settings, x0s, wells, fs, amps, mids, chunk, ensemble)
 
-        return jax.shard_map(local, mesh=mesh, in_specs=(P("grid"), P("grid")), out_specs=P("grid"),
-                             check_vma=False)(fs, amps)
+        return jax.shard_map(local, mesh=mesh, in_specs=(P("grid"), P("grid"), P("grid")), out_specs=P("grid"),
+                             check_vma=False)(fs, amps, mids)
 
     return run
 
@@ -250,14 +282,15 @@ def friction_smoothing(model, settings: SweepSettings, wells) -> tuple:
 
 
 def resolve_batching(model, settings: SweepSettings, devices) -> str:
-    """The batching a sweep runs with: "auto" resolved (`SweepSettings.batching`); "native" asked
-    for where it cannot run is a `GMRInputError` naming why and the fix."""
-    if settings.batching not in ("auto", "native"):
-        return settings.batching
+    """The batching a sweep runs with ("auto" is "lanes"); "native" asked for where it cannot run
+    is a `GMRInputError` naming why and the fix."""
+    if settings.batching != "native":
+        return "lanes" if settings.batching == "auto" else settings.batching
     why = None
     if not _native.supports(model, settings):
-        why = (f"the native kernel integrates a GlobalModel on a chain or independent DOFs in float64 "
-               f"(got {type(model).__name__}, precision {settings.precision})")
+        why = (f"the native kernel integrates a GlobalModel on a chain or independent DOFs in float64 with "
+               f"Tsit5, Dopri5 or Dopri8 (got {type(model).__name__}, precision {settings.precision}, solver "
+               f"{type(as_solver(settings.solver)).__name__})")
     elif _native.compiler() is None:
         why = "GMR_NATIVE turns it off" if _native.disabled() else "no C compiler was found ($CC, cc, gcc, clang)"
     elif jax.process_count() > 1:
@@ -270,12 +303,7 @@ def resolve_batching(model, settings: SweepSettings, devices) -> str:
             return "native"
         except (RuntimeError, OSError) as err:
             why = f"the C kernel did not build: {str(err)[-600:]}"
-            if settings.batching == "auto":
-                warnings.warn(f"basin_map: {why}; the sweep runs with batching='lanes' (GMR_NATIVE=0 skips "
-                              f"the native kernel)", RuntimeWarning, stacklevel=3)
-    if settings.batching == "native":
-        raise GMRInputError(f"batching='native' cannot run here: {why}; use SweepSettings(batching='lanes')")
-    return "lanes"
+    raise GMRInputError(f"batching='native' cannot run here: {why}; use SweepSettings(batching='lanes')")
 
 
 LANES_CPU = 128  # lanes per CPU device ("lanes"; 2 cores, 3 cells: 64-256 within noise, 512 1.7x slower)
@@ -292,9 +320,15 @@ def default_chunk(n_dof: int, batching: str = "joint", accelerator: bool = False
 
 
 def _traced(settings: SweepSettings) -> SweepSettings:
-    """Every float setting as an array: new tolerances or settle times do not recompile."""
+    """Every float setting as an array: new tolerances or settle times do not recompile (the
+    solver is left as it is)."""
     dtype = PRECISIONS[settings.precision]
-    return jax.tree.map(lambda v: jnp.asarray(v, dtype), settings)
+    arr = lambda v: None if v is None else jnp.asarray(v, dtype)  # noqa: E731
+    integ = settings.integrator
+    return dataclasses.replace(
+        settings, settle_time=arr(settings.settle_time), x_tol=arr(settings.x_tol), v_tol=arr(settings.v_tol),
+        box_spans=arr(settings.box_spans),
+        integrator=dataclasses.replace(integ, rtol=arr(integ.rtol), atol=arr(integ.atol), dt0=arr(integ.dt0)))
 
 
 def _cast(tree, dtype):
@@ -375,12 +409,25 @@ def basin_map(
     `BasinMap.result`. The Solution's `result` is `successful` unless the integrator failed on
     some point (then the first such code); a point that `diverged` (left the divergence box) or
     was `not_settled` is an outcome of the model, counted in `stats["counts"]` (points per
-    code name). `stats["batching"]` is the path that ran ("native", "lanes", ...) and
+    code name). `stats["batching"]` is the path that ran ("lanes", "native", ...),
+    `stats["solver"]` the diffrax solver's name (e.g. "Tsit5") and
     `stats["sign_eps"]` the smoothing of a Coulomb term (None: the model has none).
 
     Compiled shapes depend only on the number of points, `chunk`, the devices and the model's
     structure: new f, A, settle times, tolerances or coefficient values do not recompile.
+
+    Under `jax.jit`, `jax.vmap` (e.g. over stacked models) or `jax.grad`, with `wells` and
+    `settings` fixed (concrete), `basin_map` is a pure function of the model, `f`, `A` and
+    `x0`: one "lanes" sweep on the default device, `stats` holding only `num_steps` (the
+    points' total step attempts), a Coulomb term smoothed as outside jit (with traced
+    coefficients, e.g. under `vmap` over models, only when `settings.sign_eps` says so), and
+    `throw=True` an `eqx.error_if` check. `x_final` and `v_final` are differentiable with respect
+    to `f` and `A` (each point's derivatives by forward mode through its own solve, a custom
+    JVP linear in the grid's tangents: `jax.jvp` and `jax.grad` of any smooth function of them, e.g.
+    `BasinMap.miss`); not with respect to the model's coefficients.
     """
+    if any(is_tracer(leaf) for leaf in jax.tree.leaves((model, f, A, wells, x0, settings))):
+        return _traced_map(model, f, A, wells, x0, settings, chunk, throw)
     relieve_map_pressure()  # a long session's compiled programs (`_config.map_pressure`)
     f_np, a_np, wells_np, x0_np = _check_inputs(model, f, A, wells, x0)
     model, sign_eps = friction_smoothing(model, settings, wells_np)
@@ -399,18 +446,107 @@ def basin_map(
     flat_f, flat_a = ff.ravel(), aa.ravel()
     order = np.lexsort((flat_a, flat_f))  # by f, then A: similar actuations share a chunk
     n = flat_f.size
+    solver = type(as_solver(settings.solver)).__name__ if batching in ("lanes", "native") else "Tsit5"
     if batching == "native":
         cat = _native_sweep(model, settings, settings_t, x0, wells, flat_f[order], flat_a[order], progress, n_threads)
         first = np.empty(n, int)
         first[order] = np.arange(n)
         return _finish(cat, first, f_np, a_np, x0.shape[0], {"chunk": _native.LANES, "devices": 1,
                                                               "threads": n_threads or _native.threads(),
-                                                              "sign_eps": sign_eps},
+                                                              "sign_eps": sign_eps, "solver": solver},
                        batching, throw)
+    cat, extra = _run_points(model, False, settings, settings_t, x0[None], wells[None], flat_f[order], flat_a[order],
+                             None, chunk, devices, progress)
+    first = np.empty(n, int)
+    first[order] = np.arange(n)
+    return _finish(cat, first, f_np, a_np, x0.shape[0], {**extra, "sign_eps": sign_eps, "solver": solver}, batching,
+                   throw)
+
+
+def _traced_map(model, f, A, wells, x0, settings: SweepSettings, chunk, throw: bool) -> Solution:
+    """`basin_map` as a pure function of traced arrays (its docstring): one lanes sweep."""
+    if is_tracer(wells) or not isinstance(settings, SweepSettings) or any(
+            is_tracer(leaf) for leaf in jax.tree.leaves(settings)):
+        raise GMRInputError("basin_map under jax.jit / vmap / grad needs the wells and the settings fixed (concrete "
+                            "values, e.g. functools.partial(basin_map, wells=wells, settings=settings)): they decide "
+                            "the classification and the compiled program")
+    if settings.batching not in ("auto", "lanes"):
+        raise GMRInputError(f"basin_map under jax.jit / vmap / grad runs batching='lanes' (got "
+                            f"{settings.batching!r}: it runs outside jit); use SweepSettings(batching='lanes')")
+    if not isinstance(model, AbstractMechanicalModel):
+        raise GMRInputError(f"basin_map needs a mechanical model (GlobalModel, KreslingChain, ...), got "
+                            f"{type(model).__name__}")
+    wells_np = np.asarray(wells, float)
+    d = model.n_dof
+    if wells_np.ndim != 2 or wells_np.shape[0] != d:
+        raise GMRInputError(f"wells must be (dof, max_wells) = ({d}, k) for this {d}-DOF model, got shape "
+                            f"{wells_np.shape}")
+    if jnp.ndim(f) != 1 or jnp.ndim(A) != 1:
+        raise GMRInputError(f"f and A must be 1-D arrays of grid values, got shapes {jnp.shape(f)}, {jnp.shape(A)}")
+    settings = dataclasses.replace(settings, batching="lanes")
+    if not any(is_tracer(leaf) for leaf in jax.tree.leaves(model)):
+        model, _ = friction_smoothing(model, settings, wells_np)
+    elif settings.sign_eps is not None and settings.sign_eps > 0:  # traced coefficients: smoothed when asked
+        model = model.with_sign_eps(float(settings.sign_eps))
+    dtype = PRECISIONS[settings.precision]
+    wells_j = jnp.asarray(wells_np, dtype)
+    x0 = wells_j[:, 0] if x0 is None else jnp.asarray(x0, dtype)
+    f, A = jnp.asarray(f, dtype), jnp.asarray(A, dtype)
+    ff, aa = jnp.meshgrid(f, A)
+    fs, amps = ff.ravel(), aa.ravel()
+    n = fs.shape[0]
+    lanes = min(int(chunk) if chunk is not None else default_chunk(d, "lanes"), n)
+    st = _traced(settings)
+    mids = jnp.zeros(n, jnp.int32)
+
+    def states(fs, amps):
+        return _chunks(model, st, x0[None], wells_j[None], fs, amps, mids, lanes, False)
+
+    def derivatives(fs, amps):
+        # each point's final state depends on its own (f, A) only: one forward-mode pass with the two
+        # tangents (all f, all A) gives every point's derivatives
+        def one(t_f, t_a):
+            out, tan = jax.jvp(states, (fs, amps), (t_f, t_a))
+            return out, (tan[3], tan[4])
+
+        ones, zeros = jnp.ones_like(fs), jnp.zeros_like(fs)
+        return jax.vmap(one, out_axes=(None, 0))(jnp.stack([ones, zeros]), jnp.stack([zeros, ones]))
+
+    @jax.custom_jvp
+    def sweep(fs, amps):
+        return states(fs, amps)
+
+    @sweep.defjvp
+    def _(primals, tangents):
+        # the tangent is linear in (t_f, t_a) with the points' own derivatives: jvp and its transpose (grad)
+        out, (dx, dv) = derivatives(*primals)
+        t_f, t_a = (t[:, None] for t in tangents)
+        none = lambda o: np.zeros(o.shape, jax.dtypes.float0)  # noqa: E731  (integer outputs)
+        return out, (none(out[0]), none(out[1]), none(out[2]), dx[0] * t_f + dx[1] * t_a, dv[0] * t_f + dv[1] * t_a,
+                     none(out[5]))
+
+    idx, config, code, x1, v1, steps = sweep(fs, amps)
+    na, nf = A.shape[0], f.shape[0]
+    bm = BasinMap(f=f, A=A, wells=idx.reshape(na, nf, d), config=config.reshape(na, nf),
+                  result=code.reshape(na, nf), x_final=x1.reshape(na, nf, d), v_final=v1.reshape(na, nf, d),
+                  steps=steps.reshape(na, nf))
+    outcome = (code == RESULTS.successful._value) | (code == RESULTS.diverged._value) | (
+        code == RESULTS.not_settled._value)
+    first = jnp.argmax(~outcome)
+    result = as_result(jnp.where(jnp.any(~outcome), code[first], RESULTS.successful._value))
+    return error_if_failed(Solution(value=bm, result=result, stats={"num_steps": jnp.sum(steps)}), throw)
+
+
+def _run_points(model, ensemble, settings, settings_t, x0s, wells, fs, amps, mids, chunk, devices, progress):
+    """(idx, config, code, x1, v1, steps) of the points (fs, amps[, mids]) in the order given,
+    sharded over `devices` in up to 20 calls of one compiled function when `progress` is given,
+    and the stats (chunk, devices)."""
+    n = fs.size
+    dtype = PRECISIONS[settings.precision]
     nd = len(devices)
     if chunk is None:
         accelerator = devices[0].platform != "cpu"
-        chunk = default_chunk(model.n_dof, settings.batching, accelerator)
+        chunk = default_chunk(int(x0s.shape[1]), settings.batching, accelerator)
     chunk = int(chunk)
     if chunk < 1:
         raise GMRInputError(f"chunk must be >= 1, got {chunk}")
@@ -420,22 +556,24 @@ def basin_map(
     k = -(-per_dev // calls)  # chunks per device per call
     calls = -(-per_dev // k)
     total = calls * k * nd * chunk
-    pad = np.concatenate([order, np.full(total - n, order[-1])])
-    # call c, device j, slot i holds sorted chunk (c * k + i) * nd + j: devices take turns
+    pad = np.concatenate([np.arange(n), np.full(total - n, n - 1)])
+    # call c, device j, slot i holds chunk (c * k + i) * nd + j: devices take turns
     layout = pad.reshape(calls, k, nd, chunk).transpose(0, 2, 1, 3).reshape(calls, -1)
-    run = None if nd == 1 else _sharded(devices, chunk)
+    run = None if nd == 1 else (_sharded(devices, chunk, True) if ensemble else _sharded(devices, chunk))
     multi = jax.process_count() > 1 and run is not None
     if multi:  # host values, identical in every process, are what a multi-process jit takes
-        model, settings_t, x0, wells = jax.tree.map(
-            lambda a: np.asarray(a) if eqx.is_array(a) else a, (model, settings_t, x0, wells))
+        model, settings_t, x0s, wells = jax.tree.map(
+            lambda a: np.asarray(a) if eqx.is_array(a) else a, (model, settings_t, x0s, wells))
+    mids = np.zeros(n, np.int32) if mids is None else np.asarray(mids, np.int32)
     parts = []
     for c in range(calls):
-        fs, amps = flat_f[layout[c]].astype(dtype), flat_a[layout[c]].astype(dtype)  # NumPy: the same
-        # global input in every process
+        # NumPy: the same global input in every process
+        f_c, a_c, m_c = fs[layout[c]].astype(dtype), amps[layout[c]].astype(dtype), mids[layout[c]]
         if run is None:
-            out = _sweep_points(model, settings_t, x0, wells, jnp.asarray(fs), jnp.asarray(amps), chunk)
+            out = _sweep_points(model, settings_t, x0s, wells, jnp.asarray(f_c), jnp.asarray(a_c), jnp.asarray(m_c),
+                                chunk, ensemble)
         else:
-            out = run(model, settings_t, x0, wells, fs, amps)
+            out = run(model, settings_t, x0s, wells, f_c, a_c, m_c)
         if multi:  # every process gets the whole map (jax.distributed)
             from jax.experimental import multihost_utils
 
@@ -447,8 +585,7 @@ def basin_map(
     src = layout.ravel()
     first = np.full(n, -1)
     first[src[::-1]] = np.arange(src.size)[::-1]  # first slot holding each point
-    return _finish(cat, first, f_np, a_np, x0.shape[0], {"chunk": chunk, "devices": nd, "sign_eps": sign_eps},
-                   batching, throw)
+    return [o[first] for o in cat], {"chunk": chunk, "devices": nd}
 
 
 def _native_sweep(model, settings, settings_t, x0, wells, fs, amps, progress, n_threads=None):
@@ -506,3 +643,48 @@ def n_chunk_compiles() -> int:
     """Number of compiled single-device sweep functions (a trace counter for tests)."""
     return _sweep_points._cached._cache_size()
 
+
+
+def ensemble_configs(models, f_np, a_np, wells_m, x0s, settings: SweepSettings, chunk=None, devices=None,
+                     progress=None):
+    """Configurations (M, NA, NF) and RESULTS codes (M, NA, NF) of M models of one structure
+    (`models`: a `GlobalModel` whose arrays have a leading axis M, `wells_m` (M, dof, max_wells),
+    `x0s` (M, dof)) over one (f, A) grid. Under "lanes" batching the models are data: every
+    (model, grid point) pair goes through one compiled lanes loop (each lane carries its
+    point's coefficients, wells and box), so M models cost one sweep of M x NA x NF points, not M
+    sweeps; other batchings sweep the models one after another with `basin_map`."""
+    m_count = wells_m.shape[0]
+    devices = tuple(jax.devices() if devices is None else devices)
+    batching = resolve_batching(jax.tree.map(lambda a: a[0] if eqx.is_array(a) else a, models), settings, devices)
+    na, nf = a_np.size, f_np.size
+    if batching != "lanes":
+        configs, codes = [], []
+        for k in range(m_count):
+            mk = jax.tree.map(lambda a, k=k: a[k] if eqx.is_array(a) else a, models)
+            sol = basin_map(mk, f_np, a_np, wells_m[k], x0=x0s[k], settings=settings, chunk=chunk, devices=devices,
+                            throw=False)
+            configs.append(np.asarray(sol.value.config))
+            codes.append(np.asarray(sol.value.result))
+            if progress is not None:
+                progress(k + 1, m_count)
+        return np.stack(configs), np.stack(codes)
+    settings = dataclasses.replace(settings, batching="lanes")
+    dtype = PRECISIONS[settings.precision]
+    if dtype != jnp.float64:
+        models = _cast(models, dtype)
+    ff, aa = np.meshgrid(f_np, a_np)
+    flat_f, flat_a = ff.ravel(), aa.ravel()
+    order = np.lexsort((flat_a, flat_f))  # by f, then A; the models of one grid point side by side
+    n_grid = flat_f.size
+    fs = np.repeat(flat_f[order], m_count)
+    amps = np.repeat(flat_a[order], m_count)
+    mids = np.tile(np.arange(m_count), n_grid)
+    report = None if progress is None else (lambda done, total: progress(done * m_count // total, m_count))
+    cat, _ = _run_points(models, True, settings, _traced(settings), jnp.asarray(x0s, dtype),
+                         jnp.asarray(wells_m, dtype), fs, amps, mids, chunk, devices, report)
+    config, code = cat[1], cat[2]
+    out_cfg, out_code = np.empty((m_count, n_grid), config.dtype), np.empty((m_count, n_grid), code.dtype)
+    slot = np.arange(n_grid * m_count)
+    out_cfg[mids, order[slot // m_count]] = config
+    out_code[mids, order[slot // m_count]] = code
+    return out_cfg.reshape(m_count, na, nf), out_code.reshape(m_count, na, nf)

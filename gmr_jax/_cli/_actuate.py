@@ -23,7 +23,10 @@ def register(sub):
     a.add_argument("--A-range", default="0.02:1", help="half-sine amplitudes searched, LO:HI (force units)")
     a.add_argument("--x-range", default=None, help="LO:HI deformation interval to search for wells (default: "
                    "the stable roots of the model's restoring polynomial)")
-    a.add_argument("--settle-time", type=positive_float, default=10.0, help="free time after the load, s (default 10)")
+    a.add_argument("--settle-time", type=positive_float, default=None,
+                   help="free time after the load before the final state is judged, s (default: the model's own, "
+                        "the time its slowest free vibration about its wells takes to decay a thousandfold, at "
+                        "least 10 s; as gmr basins advises)")
     a.add_argument("--objective", choices=["peak", "effort"], default="peak",
                    help="minimise the peak force (default) or the integral of F^2 dt")
     a.add_argument("--grid", type=positive_int, default=24, help="seed grid points per axis (default 24)")
@@ -67,8 +70,17 @@ def run(args):
     print(f"gmr actuate: wells per cell {[np.round(w[~np.isnan(w)], 6).tolist() for w in wells]} ({how})")
     if args.draws < 0:
         raise GMRInputError(f"--draws must be >= 0, got {args.draws}")
-    if args.grid < 2 or args.seeds < 1 or args.knots < 3 or not args.settle_time > 0 or not args.sign_eps > 0:
+    if args.grid < 2 or args.seeds < 1 or args.knots < 3 or not args.sign_eps > 0:
         raise GMRInputError("need --grid >= 2, --seeds >= 1, --knots >= 3, --settle-time > 0, --sign-eps > 0")
+    if args.settle_time is None:
+        from .._basins._settle import model_settle_time
+
+        args.settle_time = model_settle_time(model, wells)
+        if args.settle_time is None:
+            raise GMRInputError("the model's free motion about its wells does not decay (no damping there): no settle "
+                                "time lets a final state be judged; check its damping terms, or give --settle-time")
+        print(f"gmr actuate: settle time {args.settle_time:g} s after the load (the model's slowest free vibration "
+              f"about its wells decays a thousandfold in it; --settle-time to change)")
     settings = gmr.ActuateSettings(
         f_range=interval(args.f_range, "f-range", positive=True), A_range=interval(args.A_range, "A-range"),
         n_f=args.grid, n_A=args.grid, n_seeds=args.seeds, objective=args.objective,
@@ -168,12 +180,14 @@ def _robustness(gmr, model, act, wells, settings, target: int, args) -> dict:
                             f"the design is; it is verified on the model only, at its basin boundary"}
     configs = np.asarray(bp.configs).tolist()
     prob = np.asarray(bp.probability)[:, 0, :]  # (amplitudes, configs)
+    unsettled = np.asarray(bp.unsettled)[:, 0]  # (amplitudes,): not settled by t1, apart from ending elsewhere
     # the sweep's codes are digits in base K (the well slots of the model in the box): the target's bits there
     target = config_code(_digits(target, model.n_dof, 2), well_base(gmr.stable_wells(model, box)))
     share = prob[:, configs.index(target)] if target in configs else np.zeros(len(amps))
     ok = np.nonzero(share >= ROBUST_SHARE)[0]
     a95 = float(amps[ok[0]]) if ok.size else None
     lad = [[float(k), float(a), float(p)] for k, a, p in zip(LADDER, amps, share)]
+    elsewhere = 1.0 - share - unsettled  # settled in another configuration (or failed, diverged)
     if a95 is None:
         tail = (f"no amplitude up to {LADDER[-1]:g} x ({amps[-1]:.4g}) deploys {100 * ROBUST_SHARE:.0f} % of them "
                 f"(best {100 * float(np.max(share)):.0f} %): the data do not make this deployment reliable")
@@ -182,7 +196,13 @@ def _robustness(gmr, model, act, wells, settings, target: int, args) -> dict:
     else:
         tail = (f"A = {a95:.4g} ({a95 / amps[0]:.3g} x, f the same) deploys {100 * ROBUST_SHARE:.0f} %: the lowest-peak "
                 f"design sits on the model's basin boundary, so use the larger amplitude on hardware")
+    rest = f"{100 * float(elsewhere[0]):.0f} % end in another configuration"
+    if unsettled[0] > 0:
+        rest += (f", {100 * float(unsettled[0]):.0f} % had not settled {settings.sweep.settle_time:g} s after the "
+                 f"load (undecided: lengthen --settle-time)")
     sentence = (f"{'warning' if share[0] < ROBUST_SHARE else 'robustness'}: over {used} models drawn from the file's "
-                f"covariance (the structures its data admit), the design deploys {100 * float(share[0]):.0f} %; {tail}")
+                f"covariance (the structures its data admit), the design deploys {100 * float(share[0]):.0f} % "
+                f"({rest}); {tail}")
     return {"draws": used, "drawn": int(st["samples_drawn"]), "ladder": lad, "share_at_design": float(share[0]),
-            "robust_A": a95, "sentence": sentence}
+            "unsettled_at_design": float(unsettled[0]), "elsewhere_at_design": float(elsewhere[0]),
+            "settle_time": float(settings.sweep.settle_time), "robust_A": a95, "sentence": sentence}

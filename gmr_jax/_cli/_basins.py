@@ -18,7 +18,10 @@ def register(sub):
     b.add_argument("--x-range", default=None, help="LO:HI deformation interval to search for wells (default: the "
                    "stable roots of the model's restoring polynomial, within the training data range when the file "
                    "records it)")
-    b.add_argument("--settle-time", type=positive_float, default=10.0, help="free time after the load, s (default 10)")
+    b.add_argument("--settle-time", type=positive_float, default=None,
+                   help="free time after the load before the final state is judged, s (default: the model's own, "
+                        "the time its slowest free vibration about its wells takes to decay a thousandfold, at "
+                        "least 10 s; 10 s for a model whose free motion does not decay)")
     b.add_argument("--load", choices=["tip", "base"], default="tip",
                    help="tip: force A sin(2 pi f t) on the last mass (Eq. 25, default); base: the same half-sine "
                    "as base acceleration (A in m/s^2)")
@@ -27,11 +30,14 @@ def register(sub):
     b.add_argument("--rtol", type=tolerance, default=1e-6, help="relative tolerance, 0 < rtol < 1 (default 1e-6)")
     b.add_argument("--atol", type=tolerance, default=1e-8, help="absolute tolerance, 0 < atol < 1 (default 1e-8)")
     b.add_argument("--batching", choices=["auto", "native", "lanes", "joint", "member"], default="auto",
-                   help="auto (default): native on a CPU where it applies, else lanes; native: a C kernel generated "
-                        "from the model (per-point step control, 16 points at a time in vector registers, all cores; needs a C "
-                        "compiler, float64 polynomial models); lanes: the same per-point control in a vectorised "
-                        "XLA loop (any model, GPUs); joint: each chunk as one ODE with a shared step; member: vmap "
-                        "of one solve per point")
+                   help="auto (default) = lanes: diffrax's solver and step-size controller, each point with its own "
+                        "step control, in lanes that take the next point when one is done (any model, CPUs and "
+                        "GPUs); native: an opt-in C kernel generated from the model (the same queue, 16 points at a "
+                        "time in vector registers, all cores, 4-7x faster on a CPU; needs a C compiler, float64 "
+                        "polynomial models, tsit5/dopri5/dopri8); joint: each chunk as one ODE with a shared step; "
+                        "member: vmap of one solve per point")
+    b.add_argument("--solver", choices=["tsit5", "dopri5", "dopri8", "kvaerno5"], default="tsit5",
+                   help="diffrax solver of each point (default tsit5; kvaerno5: implicit, for a stiff chain)")
     b.add_argument("--chunk", type=positive_int, default=None,
                    help="lanes per device (lanes: default 128 on a CPU, 32768 on a GPU) or points integrated "
                         "together (joint, member: default about 1280 / DOFs, 64-512)")
@@ -95,7 +101,7 @@ def _probability(gmr, model, args, f, A, x0, settings, out, wells) -> None:
     conf = np.asarray(bp.confidence)
     np.savez(out / "basins_probability.npz", f=f, A=A, configs=np.asarray(bp.configs),
              probability=np.asarray(bp.probability), most_likely=np.asarray(bp.most_likely), confidence=conf,
-             mean_config=np.asarray(bp.mean_config))
+             mean_config=np.asarray(bp.mean_config), unsettled=np.asarray(bp.unsettled))
     fig, ax = plt.subplots(figsize=(6.4, 4.8))
     im = ax.pcolormesh(f, A, conf, vmin=0.0, vmax=1.0, cmap="viridis", shading="nearest")
     fig.colorbar(im, ax=ax, label="probability of the most likely configuration")
@@ -111,12 +117,14 @@ def _probability(gmr, model, args, f, A, x0, settings, out, wells) -> None:
           f"likely at {100 * float(np.mean(conf >= 0.9)):.3g} %; the model's own map is the most likely at "
           f"{100 * agree:.3g} % (basins_probability.npz, basins_confidence.png)")
     configs = np.asarray(bp.configs)
-    if np.any(configs == -1):  # audit: draws that did not settle were counted as used, and nothing said so
-        unsettled = np.asarray(bp.probability)[..., int(np.argmax(configs == -1))]
+    if np.any(configs == -1):
+        lost = np.asarray(bp.probability)[..., int(np.argmax(configs == -1))]
+        unsettled = np.asarray(bp.unsettled)
         most = int(np.sum(np.asarray(bp.most_likely) == -1))
-        print(f"gmr basins: warning: --draws: {100 * float(np.mean(unsettled)):.3g} % of the drawn runs did not "
-              f"settle in a well or failed (configuration -1), the most likely outcome at {most} of {conf.size} "
-              f"points: lengthen --settle-time (now {args.settle_time:g} s), or those points' maps are unknown")
+        print(f"gmr basins: warning: --draws: {100 * float(np.mean(lost)):.3g} % of the drawn runs ended in no well "
+              f"(configuration -1): {100 * float(np.mean(unsettled)):.3g} % had not settled (lengthen --settle-time, "
+              f"now {args.settle_time:g} s), {100 * float(np.mean(lost - unsettled)):.3g} % failed or diverged; the "
+              f"most likely outcome at {most} of {conf.size} points, whose maps are unknown")
 
 
 def _beyond_data(model, model_path, A, load: str) -> str | None:
@@ -161,38 +169,20 @@ def _beyond_data(model, model_path, A, load: str) -> str | None:
             f"bound: dynamic overshoot goes beyond at lower A too)")
 
 
-def _settle_advice(model, wells, settle_time: float, max_configs: int = 64) -> str:
+def _settle_advice(model, wells, settle_time: float) -> str:
     """What to pass where points had not settled: the slowest decay rate sigma of the model's free
-    motion about its stable configurations (each DOF at one of its wells; the eigenvalues of the
-    linearised equations of motion, at most `max_configs` configurations), and the settle time
-    7 / sigma in which that mode decays a thousandfold."""
-    import itertools
+    motion about its stable configurations (`slowest_decay`), and the settle time 7 / sigma in
+    which that mode decays a thousandfold."""
+    from .._basins._settle import DECAYS, slowest_decay
 
-    import jax
-    import jax.numpy as jnp
-
-    d = model.n_dof
-    per_dof = [w[~np.isnan(w)] for w in np.asarray(wells, float)]
-
-    def field(state):
-        x, v = state[:d], state[d:]
-        return jnp.concatenate([v, model.accelerations(x, v, 0.0, jnp.zeros(d))])
-
-    jac = jax.jit(jax.jacfwd(field))
-    rates, scale = [], 0.0
-    for conf in itertools.islice(itertools.product(*per_dof), max_configs):
-        state = jnp.concatenate([jnp.asarray(conf, float), jnp.zeros(d)])
-        ev = np.linalg.eigvals(np.asarray(jac(state)))
-        rates.append(float(np.min(-ev.real)))
-        scale = max(scale, float(np.max(np.abs(ev))))
-    sigma = min(rates) if rates else float("nan")
+    sigma, scale = slowest_decay(model, wells)
     if not np.isfinite(sigma):
         return f"points not settled: lengthen --settle-time (now {settle_time:g} s)"
     if sigma <= 1e-9 * scale:  # rounding of a purely imaginary pair
         return (f"points not settled: the model's free motion about a configuration of its wells does not decay "
                 f"(slowest linearised decay rate {sigma:.3g} 1/s: no damping there), so no settle time will do; "
                 f"check its damping terms")
-    need = 7.0 / sigma
+    need = DECAYS / sigma
     return (f"points not settled: the model's slowest free vibration about its wells decays at {sigma:.3g} 1/s "
             f"(time constant {1 / sigma:.3g} s), so it needs about {need:.3g} s to settle "
             f"(now {settle_time:g} s): rerun with --settle-time {float(f'{need:.2g}'):g}")
@@ -246,6 +236,7 @@ def run(args) -> int:
     import gmr_jax as gmr
 
     n_cpu = gmr.use_cpu_cores(args.cpu_devices, strict=False)  # before any JAX computation
+    import diffrax as dfx
     import jax
 
     from ..plots._basins import basin_figure, well_label
@@ -256,7 +247,16 @@ def run(args) -> int:
     model = gmr.load_model(args.model)
     wells, how = find_wells(model, args.x_range, args.model)
     x0 = start_configuration(args.start, wells)
+    if args.settle_time is None:
+        from .._basins._settle import model_settle_time
+
+        need = model_settle_time(model, wells)
+        args.settle_time = 10.0 if need is None else need
+        print(f"gmr basins: settle time {args.settle_time:g} s after the load ("
+              + ("the model's slowest free vibration about its wells decays a thousandfold in it"
+                 if need is not None else "its free motion about its wells does not decay") + "; --settle-time to change)")
     settings = gmr.SweepSettings(settle_time=args.settle_time, load=args.load, batching=args.batching,
+                                 solver=getattr(dfx, args.solver.capitalize())(),  # tsit5 -> diffrax.Tsit5
                                  integrator=gmr.Integrator(rtol=args.rtol, atol=args.atol, max_steps=100_000))
     n = f.size * A.size
     devs = jax.devices()
