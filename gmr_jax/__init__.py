@@ -5,7 +5,8 @@ model -> simulate / basins / refine / actuate / discover. Browsable namespaces:
 `gmr_jax.systems` (built-in systems that make data), `gmr_jax.metrics` (accuracy against a
 truth), `gmr_jax.data` (the EMPS recordings), `gmr_jax.plots` (figures).
 
-Importing gmr_jax enables JAX float64 (`jax_enable_x64`): the numerics need it.
+Importing gmr_jax enables JAX float64 (`jax_enable_x64`): the numerics need it; and JAX's
+persistent compilation cache in `~/.cache/gmr_jax/xla` (`$GMR_CACHE_DIR`; `use_compilation_cache`).
 """
 
 import importlib.metadata as _metadata
@@ -122,3 +123,6 @@ try:
     __version__ = _metadata.version("gmr_jax")
 except _metadata.PackageNotFoundError:  # a source tree that was not installed
     __version__ = "0+unknown"
+
+# compiled programs kept on disk between processes (`use_compilation_cache`: the folder, or off)
+_config.compilation_cache_on_import()

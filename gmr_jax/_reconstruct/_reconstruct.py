@@ -30,6 +30,7 @@ from .._fit._threshold import default_thresholds, select_threshold
 from .._model._model import GlobalModel
 from .._model._predict import forces
 from .._recordings._derivatives import TONAL, band_edge, tonal_fraction
+from .._recordings._inputs import as_recordings
 from .._recordings._recording import Recording, length_unit, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
@@ -872,8 +873,8 @@ def reconstruct(
 
     **Arguments:**
 
-    - `recordings`: one per equilibrium (single DOF) or per configuration (chain). Missing
-      v/a are estimated from x (Savitzky-Golay).
+    - `recordings`: one per equilibrium (single DOF) or per configuration (chain): `Recording`s,
+      file paths or dicts of arrays (`as_recording`). Missing v/a are estimated from x (Savitzky-Golay).
     - `library`: local library orders r, d (Eqs. 5-7).
     - `solver`, `select`: STLS settings; `select=None` uses `solver.threshold` as given.
     - `topology`: "chain" (default for several DOFs) or "independent".
@@ -1004,6 +1005,7 @@ def reconstruct(
     with different masses, inconsistent shapes) raise `GMRInputError` before anything is
     computed.
     """
+    recordings = as_recordings(recordings)  # paths and arrays as well as Recordings
     given = dict(locals())  # the call's arguments, for rule 14d's refit (`_window_check`)
     relieve_map_pressure()  # a long session's compiled programs (`_config.map_pressure`)
     failure = _Failure("reconstruct", throw)
@@ -1285,6 +1287,7 @@ def gmc_sindy(
     support was still changing at `max_iter` is kept (as pysindy does) with a warning in
     `stats["warnings"]`, beside the data checks of `reconstruct` that apply to one global fit
     (masses, clipping, missing input, training R²); a non-finite fit is a failure (`throw`)."""
+    recordings = as_recordings(recordings)  # paths and arrays as well as Recordings
     relieve_map_pressure()  # a long session's compiled programs (`_config.map_pressure`)
     failure = _Failure("gmc_sindy", throw)
     recs, masses, topology, warnings = _resolve(recordings, masses, topology, min_recordings=1)
