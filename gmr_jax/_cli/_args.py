@@ -1,6 +1,7 @@
 """Argument types and checks shared by the `gmr` subcommands (each names the option and the fix)."""
 
 import argparse
+import re
 import sys
 import warnings
 from pathlib import Path
@@ -254,5 +255,28 @@ def load_recordings(paths, column_spec=None) -> tuple[list, list[str]]:
         if not issubclass(w.category, GMRDataWarning):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     for m in msgs:
-        print(f"warning: {m}", file=sys.stderr)
+        print(f"warning: {short_warning(m)}", file=sys.stderr)
     return recs, msgs
+
+
+#: words a warning's fix starts with (`short_warning`)
+_FIX = re.compile(r"(?:^|[;:(]\s*|\.\s+|, or |, then )((?:give|fix|label|scale|record|re-record|measure|excite|use|pass|"
+                  r"flip|check|remove|lower|raise|map|add|cut|convert|keep|set|try|refit|narrow|widen|drop|turn)\b[^;()]*)")
+
+
+def short_warning(msg: str, width: int = 220) -> str:
+    """One line of a warning for the terminal: its first clause (the problem) and its fix (the last clause that
+    starts with an imperative: give, label, record, ...). The full sentence is in the model file (`gmr show`)."""
+    text = " ".join(str(msg).split())
+    if len(text) <= width:
+        return text
+    cut = [k for k in (text.find(" ("), text.find("; "), text.find(": ", text.find(": ") + 2)) if k > 20]
+    problem = text[:min(cut)] if cut else text[:120]
+    if len(problem) > 130:
+        problem = problem[:127].rsplit(" ", 1)[0] + "..."
+    fixes = [m.group(1).strip(" .,") for m in _FIX.finditer(text)]
+    fix = fixes[-1] if fixes else "see gmr show MODEL --detail"
+    room = max(width - len(problem) - 3, 40)
+    if len(fix) > room:
+        fix = fix[:room - 3].rsplit(" ", 1)[0] + "..."
+    return f"{problem} -> {fix}"

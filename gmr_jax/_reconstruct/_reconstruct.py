@@ -148,6 +148,7 @@ def _resolve(recordings, masses, topology, min_recordings=2, what="fit", exclude
         warnings += _sanity.check_units(r.name, r, topology)
         warnings += _sanity.check_acceleration_offset(r.name, r, topology)
     recs = [r.complete(topology, exclude_center=exclude_center) for r in recs]  # True: x'' leaves out x(t)
+    warnings += [w for r in recs for w in _sanity.check_force_units(r.name, r, topology, masses)]
     return recs, masses, topology, warnings
 
 
