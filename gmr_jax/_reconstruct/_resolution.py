@@ -396,12 +396,15 @@ def resolution_report(recs, targets, groups, reports, model, library, masses, to
     return ResolutionReport(wells=wells)
 
 
-def format_resolution(entries: list[dict]) -> list[str]:
-    """Lines `gmr show` prints for a model file's "resolution" key (`ResolutionReport.to_dict`)."""
+def format_resolution(entries: list[dict], detail: bool = False) -> list[str]:
+    """Lines `gmr show` prints for a model file's "resolution" key (`ResolutionReport.to_dict`); `detail`: each
+    term's t (|coefficient| / standard error) and bound (% of the global force its two standard errors move)."""
     out = []
     for w in entries:
         try:
             terms = " ".join(f"{t['name']} {'ok' if t['resolved'] else ('NO' if t['needed'] else 'no')}"
+                             + (f" (coefficient {t.get('coef') or 0:.4g} +- {t.get('se') or 0:.2g}, bound "
+                                f"{100 * (t.get('impact') or 0):.2g} %)" if detail else "")
                              for t in w["terms"])
             ratio = w["amplitude"] / w["distance"] if w.get("distance") else float("nan")
             out.append(f"  DOF {w['dof']}, well x = {w['equilibrium']:.5g}: amplitude {100 * ratio:.3g} % of the "
