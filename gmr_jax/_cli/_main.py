@@ -1,5 +1,5 @@
 """The `gmr` command line: one module per subcommand (`register(sub)` adds its parser, `run(args)`
-does the work); formats and shapes are those of the contracts (README, "File formats").
+does the work); formats and shapes are those of the contracts (docs/formats.md).
 
 Exit status: 0 success; 1 the computation failed (its RESULTS code is named); 2 the input was
 wrong (the message names the file, option or value and the fix); 3 an internal error (a bug in

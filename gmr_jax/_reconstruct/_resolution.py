@@ -212,7 +212,7 @@ class ResolutionReport:
                 cells.append(f"{mark} {t.t:.3g} / {100 * t.impact:.2g} %" + ("" if t.needed else " (not needed)"))
             miss = w.missing()
             adv = max((t.advised_ratio for t in miss if t.advised_ratio is not None), default=None)
-            extra = "".join(f" ({t.name}, beyond the oracle: {100 * t.advised_ratio:.2g} %)" for t in w.terms
+            extra = "".join(f" ({t.name}, beyond F, F', F'': {100 * t.advised_ratio:.2g} %)" for t in w.terms
                             if not t.needed and not t.resolved and t.advised_ratio is not None)
             lines.append(f"| {w.dof} | {w.equilibrium:.5g} | {100 * w.ratio:.3g} | {w.band[0]:.3g}-{w.band[1]:.3g} | "
                          f"{w.f_natural:.3g} | " + " | ".join(cells) + f" | {', '.join(NAMES[t.order] for t in miss) or '-'}"
@@ -226,7 +226,7 @@ class ResolutionReport:
                   f"{100 * BOX_MARGIN:g} % either side), % of its RMS; ok = bound <= {100 * BOUND_FRACTION:g} %; "
                   "**NO** = needed (F, F', F'') and unresolved; advised amplitude: the response amplitude (% of the "
                   "interwell distance) at which they would be, and in parentheses F''' where the global model's own "
-                  "F''' moves its force by more than the bound (beyond the curvature oracle).")
+                  "F''' moves its force by more than the bound (beyond what F, F', F'' at the wells fix).")
         nowhere = self.unresolved_everywhere()
         lines = [self.table(), "", legend]
         if nowhere:

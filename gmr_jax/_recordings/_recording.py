@@ -168,7 +168,7 @@ class Recording:
         `derivation` then says, per derived signal, what it was differentiated from, the
         order, the window of each column and whether the centre was left out (the noise model
         of `reconstruct`'s local fits, `_fit/_target_noise.py`). `window_scale`: the automatic
-        windows scaled by it (odd, at least polyorder + 2; `reconstruct`'s rule 14d refits at 0.7)."""
+        windows scaled by it (odd, at least polyorder + 2; `reconstruct` refits at 0.7 to test the damping against the window)."""
         x, v, a, derived = self.x, self.v, self.a, list(self.derived)
         info = self.integration
         how = dict(self.derivation or {})
