@@ -93,6 +93,8 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
     if unit is None:
         unit = next((r.length_unit for r in recordings if getattr(r, "length_unit", None)), None)
     lu = f" [{unit}]" if unit else ""
+    if unit and force_unit == "force":  # the model's forces are mass x length / s^2 in the recordings' units
+        force_unit = f"mass x {unit}/s²"
     vu = f" [{unit}/s]" if unit else f" ({x_unit}/s)"
     masses = np.asarray(model.masses, float)
     # an x integrated from v or a: the slow shift its drift removal took, restored as `reconstruct` restores it
@@ -175,7 +177,8 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
             nb = min(400, r.t.size)
             edges = np.linspace(0, r.t.size, nb + 1).astype(int)
             lo_, hi_ = np.minimum.reduceat(res, edges[:-1]), np.maximum.reduceat(res, edges[:-1])
-            ax_e.fill_between(r.t[edges[:-1]], lo_, hi_, color=col, alpha=0.5, lw=0, step="post",
+            ax_e.fill_between(r.t[edges[:-1]], lo_, hi_, facecolor=col, alpha=0.5, lw=0, step="post",
+                              hatch=(None, "////", "\\\\", "xx")[k % 4], edgecolor="w",
                               label=f"{r.name}: NRMSE {nrmse:.3g}" + (f" (above {cut:.2g} Hz, as fitted)"
                                                                          if cut is not None else ""))
         _dress(ax_e, "time (s)", f"measured - model ({force_unit})",
