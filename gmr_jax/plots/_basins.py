@@ -60,7 +60,7 @@ def well_label(config: int, n_dof: int, wells=None) -> str:
     return f"{label} (x = {w[config]:.4g})" if config < w.size else label
 
 
-def basin_figure(f, A, config, n_dof: int, path=None, title: str = "", *, ax=None, wells=None, load: str = "tip",
+def basin_figure(f, A, config, n_dof: int, path=None, title: str = "", *, ax=None, wells=None, load: str | None = None,
                  extrapolated_above: float | None = None) -> Figure:
     """The final configuration over the (f, A) grid, one colour per configuration (legend in
     the 0-1-1-0-0 style, cell 0 first; dark grey: not settled or failed). A configuration has
@@ -70,7 +70,7 @@ def basin_figure(f, A, config, n_dof: int, path=None, title: str = "", *, ax=Non
     equilibria per DOF ((dof, k), NaN-padded), for a one-DOF legend that says where each well is,
     and the digit base of the configuration codes where a DOF has more than two wells (without
     them the codes are read as bit fields, and a code beyond 2^n_dof is refused). `load`: "tip" (A a force, N)
-    or "base" (A a base acceleration, m/s^2), for the amplitude axis's unit. `extrapolated_above`: the amplitude
+    or "base" (A a base acceleration, m/s^2), for the amplitude axis's unit (None: both named). `extrapolated_above`: the amplitude
     above which the load's static deflection alone leaves the range the model was fitted on; that part of the map
     is the model's extrapolation and is hatched. The frequency axis starts at 0 Hz."""
     config = np.asarray(config)
@@ -109,7 +109,8 @@ def basin_figure(f, A, config, n_dof: int, path=None, title: str = "", *, ax=Non
     if f_arr.size:
         ax.set_xlim(0.0, float(f_arr.max()) + (0.5 * float(np.diff(f_arr).max()) if f_arr.size > 1 else 0.0))
     ax.set_xlabel("actuation frequency f [Hz]")
-    ax.set_ylabel("actuation amplitude A " + ("[m/s²] (base acceleration)" if load == "base" else "[N] (tip force)"))
+    ax.set_ylabel("actuation amplitude A " + {"base": "[m/s²] (base acceleration)", "tip": "[N] (tip force)"}.get(
+        load, "[N] (tip force; m/s² for a base load)"))
     ax.set_title(title or "deployment basins (tip half-sine, Eq. 25)")
     if path is not None:  # PNG (or the suffix given) and a PDF beside it
         save_with_pdf(fig, path)
