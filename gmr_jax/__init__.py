@@ -20,7 +20,7 @@ from ._config import (
     use_cpu_cores as use_cpu_cores,
 )
 from ._errors import GMRInputError as GMRInputError
-from ._reconstruct._sanity import GMRDataWarning as GMRDataWarning
+from ._reconstruct._sanity import GMRDataWarning as GMRDataWarning, unit_checks as unit_checks
 from ._solution import GMRComputationError as GMRComputationError, RESULTS as RESULTS, Solution as Solution
 from ._topology import AbstractTopology as AbstractTopology, Chain as Chain, Independent as Independent
 

@@ -260,7 +260,7 @@ def load_recordings(paths, column_spec=None) -> tuple[list, list[str]]:
 
 
 #: words a warning's fix starts with (`short_warning`)
-_FIX = re.compile(r"(?:^|[;:(]\s*|\.\s+|, or |, then )((?:give|fix|label|scale|record|re-record|measure|excite|use|pass|"
+_FIX = re.compile(r"(?i)(?:^|[;:(]\s*|\.\s+|, or |, then )((?:give|fix|label|scale|record|re-record|measure|excite|use|pass|"
                   r"flip|check|remove|lower|raise|map|add|cut|convert|keep|set|try|refit|narrow|widen|drop|turn)\b[^;()]*)")
 
 

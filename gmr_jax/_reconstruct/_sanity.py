@@ -1077,14 +1077,14 @@ def force_balance_factors(rec, topology, masses) -> list:
     return out
 
 
-def check_force_units(name: str, rec, topology, masses) -> list[str]:
+def check_force_units(name: str, rec, topology, masses, factor: float = FORCE_UNITS_FACTOR) -> list[str]:
     """Whether a force-driven record's force balance holds in the units and masses given.
 
     The equation of motion m a + F(x, v) = force (chain: per cell, with the carried inertia and force) is
     regressed with the inertia's factor mu free: force = mu (m a) + F(x, v), F a polynomial in x (to x^5) and v
     (v, x v, x^2 v, v^3) about the record's mean. In consistent units mu = 1 whatever F is; lengths written in
     the wrong unit scale x, v and a by a factor s that F absorbs (a polynomial stays one) and the inertia does
-    not: mu = 1/s. A record whose mu lies beyond `FORCE_UNITS_FACTOR` either way, with a standard error below
+    not: mu = 1/s. A record whose mu lies beyond `factor` (`FORCE_UNITS_FACTOR`) either way, with a standard error below
     `FORCE_UNITS_MAX_SE` of it, is reported with s and the slip it points to (`UNIT_SLIPS`). Skipped: records
     without a nonzero force (a base excitation scales with the kinematics: no unit shows) and DOFs whose record
     cannot separate inertia from stiffness.
@@ -1099,7 +1099,7 @@ def check_force_units(name: str, rec, topology, masses) -> list[str]:
         if mu <= 0 or se > FORCE_UNITS_MAX_SE * mu:
             continue
         s = 1.0 / mu
-        if max(s, mu) < FORCE_UNITS_FACTOR:
+        if max(s, mu) < factor:
             continue
         slip = min(UNIT_SLIPS, key=lambda k: abs(np.log(s / k)))
         if abs(np.log(s / slip)) < np.log(1.5):
@@ -1110,4 +1110,36 @@ def check_force_units(name: str, rec, topology, masses) -> list[str]:
             why = "check the units of x, v, a, the force and the masses"
         out.append(f"{name}: units: DOF {i}'s x, v, a are {s:.3g} times what its force and masses imply "
                    f"(force balance): {why}")
+    return out
+
+
+def unit_checks(recordings, *, masses=None, topology=None, factor: float = FORCE_UNITS_FACTOR) -> list[str]:
+    """The units checks `reconstruct` runs, on recordings alone (before any fit): per recording, whether its
+    measured v and a are the derivatives of its x in the same units, and, for a force-driven record, whether
+    its force balance holds in the units and masses given (`check_force_units`: a length written in mm where
+    the file says m is named with the factor 1000).
+
+    **Arguments:**
+
+    - `recordings`: `Recording`s, file paths or dicts of arrays (as `reconstruct` takes them).
+    - `masses`, `topology`: as `reconstruct` (default: the recordings' masses, else 1; a chain for several DOFs).
+    - `factor`: how far the force balance's inertia factor may be from 1, either way, before it is reported.
+
+    **Returns:** the sentences, each naming the record, the problem and the fix (empty: consistent)."""
+    from .._recordings._inputs import as_recordings
+    from .._recordings._recording import validate
+    from .._topology import as_topology
+
+    recs = [validate(r, r.name) for r in as_recordings(recordings)]
+    if not recs:
+        return []
+    d = recs[0].n_dof
+    topo = as_topology(("chain" if d > 1 else "independent") if topology is None else topology)
+    found = [r.masses for r in recs if r.masses is not None]
+    m = np.asarray(masses if masses is not None else (found[0] if found else np.ones(d)), float).reshape(-1)
+    out = []
+    for r in recs:
+        out += check_units(r.name, r, topo)
+        done = r.complete(topo)
+        out += check_force_units(r.name, done, topo, m, factor)
     return out
