@@ -129,3 +129,12 @@ def test_every_fit_option_shows_its_default(capsys):
     text = " ".join(capsys.readouterr().out.split())
     for shown in ("local restoring fit (default: 5)", "(default: gmr)", "auto (default:", "(default: from recordings"):
         assert shown in text, shown
+
+
+def test_unit_checks_before_a_fit(joint):
+    recs = [_forced(r, 1e3) for r in joint]
+    said = g.unit_checks(recs)
+    assert len(said) == len(recs) and all("factor 1000" in m for m in said)
+    assert g.unit_checks([_forced(r) for r in joint]) == []
+    assert g.unit_checks([_forced(r, 1.5) for r in joint]) == []  # within the default factor 3
+    assert len(g.unit_checks([_forced(r, 1.5) for r in joint], factor=1.2)) == len(recs)
