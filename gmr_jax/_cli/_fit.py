@@ -207,5 +207,5 @@ def _derivation_notes(recs) -> list[str]:
             parts.append(f"a differentiated from {r.derivative_source()}")
         if parts:
             notes.append(", ".join(parts))
-    return [f"  estimated: {n} ({notes.count(n)} of {len(recs)} recording(s); Savitzky-Golay, drift removed where "
-            f"integrated)" for n in dict.fromkeys(notes)]
+    how = lambda n: "drift removed; Savitzky-Golay" if "integrated" in n else "Savitzky-Golay"  # noqa: E731
+    return [f"  estimated: {n} ({notes.count(n)} of {len(recs)} recording(s); {how(n)})" for n in dict.fromkeys(notes)]

@@ -107,7 +107,7 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
     d = model.n_dof
     height = 3.0 * d + 0.7
     fig = Figure(figsize=(13.5, height))  # fixed margins: a constrained layout doubles the time to save
-    fig.subplots_adjust(left=0.06, right=0.99, wspace=0.45, hspace=0.55, top=1 - 0.62 / height,
+    fig.subplots_adjust(left=0.06, right=0.99, wspace=0.55, hspace=0.55, top=1 - 0.62 / height,
                         bottom=0.5 / height)
     axes = np.atleast_2d(fig.subplots(d, 3, squeeze=False))
     for i in range(d):
@@ -127,7 +127,7 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
             tw = ax_r.twinx()  # the band beside a force 100-1000 times its width is a line: its half-width on its own
             tw.plot(xs, 0.5 * (bhi - blo), color="tab:red", ls="--", lw=1.0)
             tw.set_ylim(0.0, 1.15 * max(half, 1e-300))
-            tw.set_ylabel(f"95 % band half-width ({force_unit})", color="tab:red", fontsize=8)
+            tw.set_ylabel("95 % band half-width", color="tab:red", fontsize=7)
             tw.tick_params(axis="y", labelcolor="tab:red", labelsize=7)
             ax_r.plot([], [], color="tab:red", ls="--", lw=1.0, label="band half-width (right axis)")
         for k, r in enumerate(recs):
