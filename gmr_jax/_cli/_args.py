@@ -259,14 +259,15 @@ def load_recordings(paths, column_spec=None) -> tuple[list, list[str]]:
     return recs, msgs
 
 
-#: words a warning's fix starts with (`short_warning`)
-_FIX = re.compile(r"(?i)(?:^|[;:(]\s*|\.\s+|, or |, then )((?:give|fix|label|scale|record|re-record|measure|excite|use|pass|"
-                  r"flip|check|remove|lower|raise|map|add|cut|convert|keep|set|try|refit|narrow|widen|drop|turn)\b[^;()]*)")
+#: where a warning's fix starts: a clause (after ':', ';' or a full stop) that opens with an imperative
+_FIX = re.compile(r"(?i)(?:[;:]\s+|\.\s+)(?=(?:give|fix|label|scale|record|re-record|measure|excite|use|pass|flip|"
+                  r"check|remove|lower|raise|map|add|cut|convert|keep|set|try|refit|narrow|widen|drop|turn)\b)")
 
 
 def short_warning(msg: str, width: int = 220) -> str:
     """One line of a warning for the terminal: its first clause (the problem) and its fix (the last clause that
-    starts with an imperative: give, label, record, ...). The full sentence is in the model file (`gmr show`)."""
+    opens with an imperative, give, label, record, ..., to the end). The full sentence is in the model file
+    (`gmr show`)."""
     text = " ".join(str(msg).split())
     if len(text) <= width:
         return text
@@ -274,9 +275,9 @@ def short_warning(msg: str, width: int = 220) -> str:
     problem = text[:min(cut)] if cut else text[:120]
     if len(problem) > 130:
         problem = problem[:127].rsplit(" ", 1)[0] + "..."
-    fixes = [m.group(1).strip(" .,") for m in _FIX.finditer(text)]
-    fix = fixes[-1] if fixes else "see gmr show MODEL --detail"
-    room = max(width - len(problem) - 3, 40)
+    starts = [m.end() for m in _FIX.finditer(text)]
+    fix = text[starts[-1]:].rstrip(" .") if starts else "see gmr show MODEL --detail"
+    room = max(width - len(problem) - 4, 40)
     if len(fix) > room:
         fix = fix[:room - 3].rsplit(" ", 1)[0] + "..."
     return f"{problem} -> {fix}"
