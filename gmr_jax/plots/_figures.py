@@ -68,7 +68,8 @@ def case_figure(system, models: dict, recordings, path=None, dof: int = 0, title
         axm.set_title(f"{name}: damping error e_d (Eq. 22)")
         if recordings:
             axm.legend(fontsize=7, loc="upper right", markerscale=6, facecolor="0.3", labelcolor="w")
-        fig.colorbar(im, ax=axm, label=f"e_d = log10 |F_d - F_d,true| ({system.units[2]})")
+        unit = system.units[2].split("[")[-1].rstrip("]") if "[" in system.units[2] else "force units"
+        fig.colorbar(im, ax=axm, label=f"e_d = log10 |F_d - F_d,true|, F in {unit}")
     if title:
         fig.suptitle(title)
     if path is not None:
