@@ -1023,8 +1023,8 @@ def check_damping_choice(dof: int, velocity_damping, position_damping, alt_veloc
 
 
 #: `check_force_units`: a measured force that balances this many times more, or less, inertia than the masses and
-#: units given imply is reported (a length unit off by 1000 gives 1000; the clean built-in records stay within
-#: 0.99-1.02, results/units_check.md)
+#: units given imply is reported (a length unit off by 1000 gives 1000; the clean built-in records' margin:
+#: results/units_check.md)
 FORCE_UNITS_FACTOR = 3.0
 #: `check_force_units`: the relative standard error of the balance's inertia factor above which the record cannot
 #: tell (a steady single sine: its inertia and stiffness columns are collinear)
