@@ -874,8 +874,9 @@ def reconstruct(
 
     **Arguments:**
 
-    - `recordings`: one per equilibrium (single DOF) or per configuration (chain): `Recording`s,
-      file paths or dicts of arrays (`as_recording`). Missing v/a are estimated from x (Savitzky-Golay).
+    - `recordings`: one per equilibrium (single DOF) or per configuration (chain): `Recording`s, file
+      paths (`load_recording`), or dicts or structured arrays of named signals (`{"t": t, "x": x,
+      "base_acc": b}`). Missing v/a are estimated from x (Savitzky-Golay).
     - `library`: local library orders r, d (Eqs. 5-7).
     - `solver`, `select`: STLS settings; `select=None` uses `solver.threshold` as given.
     - `topology`: "chain" (default for several DOFs) or "independent".
