@@ -89,7 +89,7 @@ def main():
             rows.append(f"| {c:g} | {rel4:g} | {m[0]:.3g} | {m[1]:.3g} | {m[2]:.3g} | {m[3]:.3g} | {m[3] / m[2]:.2f} | "
                         f"{took[0]}/{args.draws} | {took[1]}/{args.draws} |")
             print(rows[-1], flush=True)
-    lines = ["# Borrowed-law degree rule: Monte Carlo (issue 15)", "",
+    lines = ["# Borrowed-law degree rule: Monte Carlo", "",
              f"Command: `python studies/least_risk_mc.py --draws {args.draws}` (seed {args.seed}). "
              + __doc__.split("\n\n")[1].replace("\n", " "), "",
              "| c (x^6 of the truth) | rel. sd of q^4 | nonic | septic | C_p (least estimate) | one-SE rule "
