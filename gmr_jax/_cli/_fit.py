@@ -150,7 +150,7 @@ def run(args) -> int:
         print(f"  figure: {png} (and .pdf): forces over the data ranges with their 95 % band, residuals")
     print(f"  details (standard errors, what each well resolved, coordination): gmr show {args.out} --detail")
     for w in st["warnings"]:  # the loading warnings were printed as the files were read
-        print(f"warning: {short_warning(w)}", file=sys.stderr)
+        print(f"warning: {short_warning(w).replace('gmr show MODEL', f'gmr show {args.out}')}", file=sys.stderr)
     n_warn = len(load_warnings) + len(st["warnings"])
     if n_warn and args.strict:
         print(f"gmr fit: {n_warn} warning(s) with --strict: exit status 3 (model written to "
