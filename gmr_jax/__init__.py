@@ -5,7 +5,8 @@ model -> simulate / basins / refine / actuate / discover. Browsable namespaces:
 `gmr_jax.systems` (built-in systems that make data), `gmr_jax.metrics` (accuracy against a
 truth), `gmr_jax.data` (the EMPS recordings), `gmr_jax.plots` (figures).
 
-Importing gmr_jax enables JAX float64 (`jax_enable_x64`): the numerics need it.
+Importing gmr_jax enables JAX float64 (`jax_enable_x64`): the numerics need it; and JAX's
+persistent compilation cache in `~/.cache/gmr_jax/xla` (`$GMR_CACHE_DIR`; `use_compilation_cache`).
 """
 
 import importlib.metadata as _metadata
@@ -19,7 +20,7 @@ from ._config import (
     use_cpu_cores as use_cpu_cores,
 )
 from ._errors import GMRInputError as GMRInputError
-from ._reconstruct._sanity import GMRDataWarning as GMRDataWarning
+from ._reconstruct._sanity import GMRDataWarning as GMRDataWarning, unit_checks as unit_checks
 from ._solution import GMRComputationError as GMRComputationError, RESULTS as RESULTS, Solution as Solution
 from ._topology import AbstractTopology as AbstractTopology, Chain as Chain, Independent as Independent
 
@@ -126,3 +127,6 @@ try:
     __version__ = _metadata.version("gmr_jax")
 except _metadata.PackageNotFoundError:  # a source tree that was not installed
     __version__ = "0+unknown"
+
+# compiled programs kept on disk between processes (`use_compilation_cache`: the folder, or off)
+_config.compilation_cache_on_import()

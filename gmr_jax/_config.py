@@ -85,36 +85,61 @@ def _backend_started() -> bool:
         return True
 
 
-def use_compilation_cache(path: str | None = None, *, min_compile_time: float = 0.2) -> str | None:
+def use_compilation_cache(path: "str | bool | None" = None, *, min_compile_time: float = 0.2) -> str | None:
     """Keep XLA's compiled programs on disk (JAX's persistent compilation cache), so that a new
-    process running the same computations (a second `gmr basins` on a model of the same
-    structure, a restarted notebook) loads them instead of compiling again.
+    process running the same computations (a second fit on records of the same shapes, a restarted
+    notebook) loads them instead of compiling again.
 
-    `path`: the cache folder (default `default_cache_dir()`: `$GMR_CACHE_DIR`, else
-    `~/.cache/gmr_jax/xla`; `GMR_CACHE_DIR=off` disables it). Programs that took less than
-    `min_compile_time` seconds to compile are not stored. The command line calls this at start;
-    in a notebook, call it once after `import gmr_jax`. Returns the folder in use (None: off).
-    Entries are keyed by the program, the JAX version and the device, so a stale entry is never
-    used; delete the folder to reclaim the space. The traced programs of `fit_local` and
-    `coordinate` are kept there too (subfolder `gmr_traces`, keyed also by a hash of gmr_jax's
-    source), which spares a new process their tracing.
+    Importing gmr_jax turns it on in `default_cache_dir()` (`$GMR_CACHE_DIR`, else
+    `~/.cache/gmr_jax/xla`), unless JAX already has a cache folder of its own
+    (`JAX_COMPILATION_CACHE_DIR`) or `GMR_CACHE_DIR=off`. Call this to choose another folder or to
+    turn it off.
+
+    **Arguments:**
+
+    - `path`: the cache folder; None: `default_cache_dir()`; False: off (nothing is stored or read).
+    - `min_compile_time`: programs that took less than this many seconds to compile are not stored.
+
+    **Returns:** the folder in use (None: off). Entries are keyed by the program, the JAX version and
+    the device, so a stale entry is never used; delete the folder to reclaim the space. The traced
+    programs of `fit_local` and `coordinate` are kept there too (subfolder `gmr_traces`, keyed also
+    by a hash of gmr_jax's source), which spares a new process their tracing.
     """
     import os
 
-    path = default_cache_dir() if path is None else os.path.expanduser(str(path))
-    if path is None:
-        return None
-    try:
-        os.makedirs(path, exist_ok=True)
-    except OSError:  # read-only home, full disk: run without the cache rather than fail
+    from ._trace_cache import set_folder
+
+    if path is False:
+        path = None
+    else:
+        path = default_cache_dir() if path is None else os.path.expanduser(str(path))
+    if path is not None:
+        try:
+            os.makedirs(path, exist_ok=True)
+        except OSError:  # read-only home, full disk: run without the cache rather than fail
+            path = None
+    if path is None and jax.config.jax_compilation_cache_dir is None:
+        set_folder(None)
         return None
     jax.config.update("jax_compilation_cache_dir", path)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_time))
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    from ._trace_cache import set_folder
+    try:  # a cache JAX already opened keeps its folder until reset
+        from jax.experimental.compilation_cache import compilation_cache
 
+        compilation_cache.reset_cache()
+    except (ImportError, AttributeError):
+        pass
     set_folder(path)  # and the traced programs of the fits (gmr_jax._trace_cache)
     return path
+
+
+def compilation_cache_on_import() -> str | None:
+    """What importing gmr_jax does: `use_compilation_cache()` unless JAX already has a cache folder
+    (the user's `JAX_COMPILATION_CACHE_DIR` or `jax.config`), which is then left as it is."""
+    if jax.config.jax_compilation_cache_dir:
+        return jax.config.jax_compilation_cache_dir
+    return use_compilation_cache()
 
 
 #: `relieve_map_pressure`: the share of the kernel's limit on one process's memory maps

@@ -76,7 +76,7 @@ def main():
     secs = time.time() - t0
     out = ROOT / "results" / "derived_accelerations.md"
     out.write_text("\n".join([
-        "# Estimated accelerations: default against structured_noise (issue 15)", "",
+        "# Estimated accelerations: default against structured_noise", "",
         f"`python studies/derived_accelerations.py --cases {a.cases} --snrs {a.snrs} --seeds {a.seeds}` "
         f"({secs / 60:.1f} min on the shared 2-core dev machine).", "",
         "Records with displacement only (`_x`) or velocity only with the equilibrium given (`_v`, float32 time),",
@@ -84,8 +84,8 @@ def main():
         "defaults and with `structured_noise=True` (`gmr fit --structured-noise`). Error: relative L2 of the",
         "restoring force over the metrics box against the truth; oracle: the Hermite interpolant of each",
         "well's exact F, F', F'' (NO: beyond 2x of it); wells: stable wells of the fitted force / the truth's.",
-        "Since stop 40 the default turns `structured_noise` on for swept records with estimated accelerations",
-        "and for velocity-only records (the two columns then agree); stop 39's default: 2 of 12 (git history).", "",
+        "The default turns `structured_noise` on for swept records with estimated accelerations",
+        "and for velocity-only records (the two columns then agree).", "",
         f"Within 2x of the oracle: default {tally[False]} of {total}, structured_noise {tally[True]} of {total}.", "",
         *lines, ""]))
     print(f"default {tally[False]}/{total}, structured {tally[True]}/{total}; wrote {out}")

@@ -112,7 +112,7 @@ def _row(label, d):
 
 
 def write(rows, before, seeds, secs, out: Path):
-    lines = ["# Local fits with estimated accelerations: bias and calibrated uncertainty (issue 15)", "",
+    lines = ["# Local fits with estimated accelerations: bias and calibrated uncertainty", "",
              f"`python studies/derived_noise.py --seeds {seeds}" + (" --before ..." if before else "") + "`"
              f" ({secs / 60:.1f} min on the shared 2-core dev machine).", "",
              __doc__.split("\n\n")[2].replace("\n", " "), "",

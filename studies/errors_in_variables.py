@@ -114,7 +114,7 @@ def main():
 
 def write(args, table, secs):
     lines = [
-        "# Errors in variables: local fits corrected for the noise on a measured x (issue 15)", "",
+        "# Errors in variables: local fits corrected for the noise on a measured x", "",
         f"`python studies/errors_in_variables.py --seeds {args.seeds} --snr {' '.join(f'{s:g}' for s in args.snr)}` "
         f"({secs / 60:.1f} min on the 2-core dev machine). The same recordings fitted with `reconstruct` defaults, "
         "`errors_in_variables=False` (plain least squares, 'plain') and `True` (the corrected score, the default).", "",

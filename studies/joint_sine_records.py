@@ -54,7 +54,7 @@ def main():
                              len(sol.stats["warnings"]),
                              any("blew up" in w for w in sol.stats["warnings"])))
                 print(*rows[-1], flush=True)
-    lines = ["# Bistable joint, 10 Hz sine records, displacement only (issue 15)", "",
+    lines = ["# Bistable joint, 10 Hz sine records, displacement only", "",
              f"`python studies/joint_sine_records.py --seeds {args.seeds}` ({(time.time() - t0) / 60:.1f} min on the "
              "2-core dev machine). Records: the steady response to a base sine of 1 degree at 10 Hz about each "
              "well (5 s at 1 kHz), x only, noise at the SNR given. Restoring error: relative L2 against the truth's "

@@ -208,7 +208,7 @@ def write(runs, oracles, args, cmd, seconds):
     if args.before:
         before = {f"{r['twist']} {r['amp']:g} {r['seed']}": r for r in json.loads(Path(args.before).read_text())["runs"]}
     lines = ([
-        "# Kresling accuracy targets (issue 15): restoring error per cell", "",
+        "# Kresling accuracy targets: restoring error per cell", "",
         f"Command: `{cmd}` ({seconds:.0f} s; training chirp 0.5-{args.fmax or 10:g} Hz)"
         + (f"; before: `{args.before}` (this script at the commit before the change, module docstring)"
            if args.before else "") + ". Chains: `kresling5(twist=..., "

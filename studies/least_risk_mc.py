@@ -6,10 +6,10 @@ Truth F = x (x^2 - 1)(1 + 0.3 x^2 + 0.1 x^4 + c x^6) (c = 0: exactly degree 9; l
 septic is biased), wells +-1, conditions q^0..q^4 at each (q^0..q^3 precise, q^4 with relative
 standard deviation `rel4`, all drawn with their noise; the fixture of
 `tests/test_resolved_orders.py`). Rules: always the nonic (the chi-squared test: the exact
-interpolant), the least estimated risk (Mallows' C_p, stop 31: the rule in use) and the lowest
-degree within one standard error of the least (tried at stop 34 and not kept: on the 5-cell
+interpolant), the least estimated risk (Mallows' C_p, the rule in use) and the lowest
+degree within one standard error of the least (not kept: on the 5-cell
 Kresling chain it fixed three torque-free cells but took a 2.13 % quintic for the nominal 0.3 mm
-tip cell whose septic is 0.19 %; `results/README.md`). Reported: mean rms error over [-1.1, 1.1]
+tip cell whose septic is 0.19 %). Reported: mean rms error over [-1.1, 1.1]
 per rule, the ratio one-SE / C_p and how often each rule took the septic.
 
     python studies/least_risk_mc.py [--draws 60] [--out results/least_risk_mc.md]
@@ -89,7 +89,7 @@ def main():
             rows.append(f"| {c:g} | {rel4:g} | {m[0]:.3g} | {m[1]:.3g} | {m[2]:.3g} | {m[3]:.3g} | {m[3] / m[2]:.2f} | "
                         f"{took[0]}/{args.draws} | {took[1]}/{args.draws} |")
             print(rows[-1], flush=True)
-    lines = ["# Borrowed-law degree rule: Monte Carlo (issue 15)", "",
+    lines = ["# Borrowed-law degree rule: Monte Carlo", "",
              f"Command: `python studies/least_risk_mc.py --draws {args.draws}` (seed {args.seed}). "
              + __doc__.split("\n\n")[1].replace("\n", " "), "",
              "| c (x^6 of the truth) | rel. sd of q^4 | nonic | septic | C_p (least estimate) | one-SE rule "

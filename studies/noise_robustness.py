@@ -80,7 +80,7 @@ def main():
     args = p.parse_args()
     t0 = time.perf_counter()
     lines = [
-        "# Noise robustness of GMR (issue 13)",
+        "# Noise robustness of GMR",
         "",
         f"Command: `python studies/noise_robustness.py --seeds {args.seeds} --snr "
         f"{' '.join(f'{s:g}' for s in args.snr)}`. Errors: median [max] over seeds 0..{args.seeds - 1} "

@@ -132,7 +132,7 @@ def _eq(rows, meth):
 def table(before: list, after: list, args, secs: float, commit: str = "", worktree: bool = False) -> str:
     seeds = args.seeds
     lines = [
-        "# Paper cases before and after issue 15 (GMR, GMC-SINDy beside every row)", "",
+        "# Paper cases before and after (GMR, GMC-SINDy beside every row)", "",
         f"`python studies/paper_cases_before_after.py --before /tmp/before{' --after /tmp/after' if worktree else ''} "
         f"--seeds {seeds} --kresling-seeds {args.kresling_seeds}` ({secs / 60:.1f} min on the shared 2-core dev "
         f"machine{', rows of earlier runs reused' if args.reuse else ''}); /tmp/before is a `git worktree` of "

@@ -88,7 +88,7 @@ def main():
     print(text)
     if a.out:
         Path(a.out).write_text(
-            "# Recordings without their velocity channel (issue 15)\n\n"
+            "# Recordings without their velocity channel\n\n"
             f"`python studies/sensing_xa.py --seeds {a.seeds}"
             + (f" --before {a.before}" if a.before else "") + (f" --out {a.out}`" if a.out else "`")
             + f" ({time.perf_counter() - t0:.0f} s on the shared 2-core dev machine). "

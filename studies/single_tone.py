@@ -221,7 +221,7 @@ def main():
 
 def write(path, rows, true_rate, secs, seeds):
     lines = [
-        "# Single-tone analogue (issue 15)", "",
+        "# Single-tone analogue", "",
         f"`python studies/single_tone.py --seeds {seeds}` ({secs / 60:.1f} min on the 2-core dev machine).", "",
         f"Truth: preloaded shallow arch (`gmr_jax.systems.shallow_arch`, non-polynomial; wells -1.090 and 0.884, "
         f"saddle {SADDLE:.3f}).",

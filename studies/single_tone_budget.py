@@ -106,7 +106,7 @@ def main():
     cross = st.cross_record()
     measured = {s: st.measured_cross(cross, args.snr, s) for s in range(args.seeds)}
     truth_m = {s: nrmse_pair(SYSTEM.truth, cross, measured[s])[1] for s in measured}
-    lines = ["# Single-tone analogue: where the one-period NRMSE goes (issue 15)", "",
+    lines = ["# Single-tone analogue: where the one-period NRMSE goes", "",
              f"`python studies/single_tone_budget.py --seeds {args.seeds} --snr {args.snr:g} --scales {' '.join(f'{k:g}' for k in args.scales)} --sensings {' '.join(args.sensings)}` (TIME min on the 2-core dev machine). "
              f"Records and the unseen cross-well record as in [single_tone.md](single_tone.md), {args.snr:.0f} dB; "
              "'own' is the one-period NRMSE from the true states against the true x, 'measured' the same on the "

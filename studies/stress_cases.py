@@ -527,7 +527,7 @@ def main():
 
 
 def write(args, summary, body, secs):
-    lines = ["# Stress cases (issue 15)", "",
+    lines = ["# Stress cases", "",
              f"`python studies/stress_cases.py --seeds {args.seeds}"
              + (f" --cases {args.cases}" if args.cases != ",".join(CASES) else "")
              + f"` ({secs / 60:.1f} min on the shared 2-core dev machine).", "",

@@ -106,7 +106,7 @@ def main():
         b, se, orders, cover, route = fit(noisy, clean, s, False, True, coordination="auto")
         auto_redraw.append((b, se, orders, cover, route))
         print("auto redraw", b[:4], se[:4], orders, cover, route, flush=True)
-    lines = ["# Noise on v and the damping law (issue 15)", "",
+    lines = ["# Noise on v and the damping law", "",
              (f"`python studies/velocity_noise.py --seeds {args.seeds} --redraws {args.redraws} --auto-redraws "
               f"{args.auto_redraws}` ({(time.time() - t0) / 60:.1f} min on the "
               "shared 2-core dev machine)."), "", __doc__.split("\n\n    python")[0].split("\n\n", 1)[1], "",

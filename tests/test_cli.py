@@ -10,6 +10,7 @@ import pytest
 import gmr_jax as g
 from gmr_jax.metrics._metrics import restoring_error
 from gmr_jax._cli._main import main
+from gmr_jax._cli._show import describe, equilibria
 
 
 def run(args):
@@ -53,19 +54,25 @@ def test_fit_hand_made_csv(joint_files, tmp_path, capsys):
     k = np.asarray(m.stiffness)[0]
     np.testing.assert_allclose([k[1], k[3]], [-2244, 1755], rtol=0.03)
     printed = capsys.readouterr().out
-    assert "estimated from x" in printed and "F_0(x, v)" in printed
-    assert "no masses in the recordings and no --masses: taken as 1" in printed  # said, not silent
-    # the stored standard errors are printed, term by term, and agree with the file; the band the file's covariance
-    # gives the restoring force is printed beside them (the two differ: audit A read them as one)
-    assert "std. error" in printed and "from the data's noise" in printed
+    # short: the model, its wells, the fit, what was estimated from what, the figure, where the detail is
+    assert len(printed.strip().splitlines()) <= 15, printed
+    assert "v differentiated from x, a differentiated from x" in printed and "F_0(x, v)" in printed
+    assert "taken as 1" in printed  # no masses: said, not silent
+    wells = [x for x, s in equilibria(m.stiffness)[0] if s > 0]
+    assert "stable wells at x = " + ", ".join(f"{x:.4g}" for x in wells) in printed
+    # the band the file's covariance gives the restoring force is printed
     from gmr_jax._reconstruct._sanity import restoring_uncertainty
 
     xs = np.concatenate([g.load_recording(f).x[:, 0] for f in joint_files])
     band = restoring_uncertainty(k, np.asarray(m.covariance)[0], float(xs.min()), float(xs.max()))
-    assert f"the band on its restoring force ±{100 * band:.2g} %" in printed
-    assert "What each well's data resolved" in printed and "resolution" in json.loads(out.read_text())
+    assert f"restoring-force band ±{100 * band:.2g} %" in printed
+    # the stored standard errors, term by term, and what each well resolved: gmr show (--detail)
+    shown = describe(out, detail=True)
+    assert "std. error" in shown and "from the data's noise" in shown
+    assert "What each well's data resolved" in shown and "resolution" in json.loads(out.read_text())
+    assert "What each well's data resolved" not in describe(out)
     x3 = next(t for t in json.loads(out.read_text())["terms"] if t["physics"] == "stiffness" and t["order"] == 3)
-    row = next(line for line in printed.splitlines() if line.split()[:2] == ["x^3", "stiffness"])
+    row = next(line for line in shown.splitlines() if line.split()[:2] == ["x^3", "stiffness"])
     assert float(row.split()[3]) == pytest.approx(x3["stderr"], rel=1e-2)
     # the figure: PNG and PDF beside the model, a real image (restoring, damping, residual panels)
     png, pdf = tmp_path / "model_fit.png", tmp_path / "model_fit.pdf"
@@ -105,14 +112,13 @@ def test_fit_corrects_for_the_noise_on_a_measured_x(tmp_path, capsys):
     paths = _saved(recs, tmp_path)
     out, plain = tmp_path / "m.json", tmp_path / "plain.json"
     assert main(["fit", *paths, "--out", str(out), "--no-figure"]) == 0
-    printed = capsys.readouterr().out
-    assert "corrected for the noise on x (errors in variables" in printed
+    assert "corrected for the noise on x (errors in variables" in describe(out, detail=True)
     wells = json.loads(out.read_text())["coordination"][0]["errors_in_variables"]
     true_sd = [np.sqrt(np.var(r.x[:, 0]) / 1e3) for r in recs]  # the noise make_recordings added
     assert all(w["applied"] for w in wells)
     np.testing.assert_allclose([w["noise_sd"] for w in wells], true_sd, rtol=0.15)
     assert main(["fit", *paths, "--out", str(plain), "--no-figure", "--no-eiv"]) == 0
-    assert "errors in variables" not in capsys.readouterr().out
+    assert "errors in variables" not in describe(plain, detail=True)
     assert "errors_in_variables" not in json.loads(plain.read_text())["coordination"][0]
     xs = np.linspace(-1.2, 1.2, 41)[:, None]
     f_eiv, f_plain = (np.asarray(jax.vmap(g.load_model(p).restoring)(jnp.asarray(xs))) for p in (out, plain))
@@ -122,7 +128,7 @@ def test_fit_corrects_for_the_noise_on_a_measured_x(tmp_path, capsys):
     xonly2 = tmp_path / "xonly2.npz"
     np.savez(xonly2, t=recs[1].t, x=recs[1].x, base_acc=recs[1].base_acc)
     assert main(["fit", str(xonly), str(xonly2), "--out", str(tmp_path / "x.json"), "--no-figure"]) == 0
-    assert "errors in variables" not in capsys.readouterr().out
+    assert "errors in variables" not in describe(tmp_path / "x.json", detail=True)
 
 
 @pytest.mark.slow
@@ -350,12 +356,12 @@ def test_fit_corrects_the_joint_damping_for_the_noise_on_a_measured_v(tmp_path, 
     paths = _saved(recs, tmp_path)
     out, plain = tmp_path / "m.json", tmp_path / "plain.json"
     assert main(["fit", *paths, "--out", str(out), "--no-figure"]) == 0
-    assert "corrected for the noise on v" in capsys.readouterr().out
+    assert "corrected for the noise on v" in describe(out, detail=True)
     entry = json.loads(out.read_text())["coordination"][0]
     assert "joint" in entry["route"]
     true_sd = [np.sqrt(np.var(r.v[:, 0]) / 1e3) for r in recs]  # the noise make_recordings added
     assert all(w["applied"] for w in entry["velocity_noise"])
     np.testing.assert_allclose([w["noise_sd"] for w in entry["velocity_noise"]], true_sd, rtol=0.15)
     assert main(["fit", *paths, "--out", str(plain), "--no-figure", "--no-velocity-eiv"]) == 0
-    assert "noise on v" not in capsys.readouterr().out
+    assert "noise on v" not in describe(plain, detail=True)
     assert "velocity_noise" not in json.loads(plain.read_text())["coordination"][0]

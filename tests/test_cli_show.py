@@ -37,8 +37,12 @@ def test_show_equations_wells_barriers_metadata(model_file, capsys):
     assert len(wells) == 3 and "stable" in wells[0] and "saddle" in wells[1] and "stable" in wells[2]
     assert "-0.5" in wells[0] and "stable wells per DOF: [2]" in out
     assert "0.125 from the left well" in out
-    assert "rec_a" in out and "rec_b: the sweep barely" in out and "refinement" in out
+    assert "rec_a" in out and "rec_b: the sweep barely" in out
     assert "data range of x: DOF 0 [-0.6, 0.6]" in out
+    # the file's other keys: with --detail
+    assert "refinement" not in out and "--detail" in out
+    assert main(["show", str(model_file), "--detail"]) == 0
+    assert "refinement" in capsys.readouterr().out
 
 
 def test_show_barriers_match_numeric_integral(tmp_path):

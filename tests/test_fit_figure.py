@@ -39,7 +39,9 @@ def test_fit_figure_panels_and_residuals(tmp_path):
     assert (tmp_path / "f.png").stat().st_size > 10_000
     assert gmr.plots.fit_figure(model, recs, band="auto") is not None  # from_terms: no covariance, no band
     axes = fig.axes
-    assert len(axes) == 6 and calls and calls[0][1] == 2
+    # three panels per DOF, and the band's half-width on its own axis beside each restoring panel
+    assert len(axes) == 6 + 2 and calls and calls[0][1] == 2
+    assert all("half-width" in ax.get_ylabel() for ax in axes[6:])
     # data ranges shaded per recording on each restoring panel, equilibria marked
     for i in range(2):
         ax_r = axes[3 * i]

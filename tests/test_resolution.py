@@ -113,7 +113,7 @@ def test_show_prints_the_stored_resolution(tmp_path, capsys, nominal):
     sol, _ = nominal
     p = tmp_path / "m.json"
     g.save_model(sol.value, p, method="GMR", resolution=sol.stats["resolution"].to_dict())
-    assert main(["show", str(p)]) == 0
+    assert main(["show", str(p), "--detail"]) == 0
     out = capsys.readouterr().out
     assert "What each well's data resolved" in out and "F'' ok" in out
     assert "  resolution: " not in out  # shown as its own section, not as an unknown key

@@ -396,7 +396,11 @@ def test_cli_prints_warnings_records_them_and_strict_exits_3(nes, tmp_path, caps
     assert err.startswith("warning: nes_S1: column x0 looks clipped")
     saved = json.loads(out.read_text())
     assert saved["format"] == "gmr-model/1" and "clipped" in saved["warnings"][0]
-    assert err.splitlines() == [f"warning: {w}" for w in saved["warnings"]]
+    # one line per warning, each the start of the stored sentence and its fix (the full text: the model file)
+    from gmr_jax._cli._args import short_warning
+
+    assert err.splitlines() == [f"warning: {short_warning(w).replace('gmr show MODEL', f'gmr show {out}')}"
+                                for w in saved["warnings"]]
     assert main(["fit", *paths, "--out", str(out), "--strict", "--no-figure"]) == 3
     assert "--strict" in capsys.readouterr().err and out.exists()
     # a refusal is an input error: exit 2, one line naming both files

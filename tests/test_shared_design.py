@@ -207,7 +207,7 @@ def test_command_line_records_and_shows_what_was_lent_and_can_switch_it_off(tmp_
     for (dof, order), c in k_file.items():
         assert c == pytest.approx(float(api.value.stiffness[dof, order]), rel=1e-9, abs=1e-12)
     capsys.readouterr()
-    assert main(["show", str(tmp_path / "on.json")]) == 0
+    assert main(["show", str(tmp_path / "on.json"), "--detail"]) == 0
     out = capsys.readouterr().out
     assert "Cells of one design" in out and "DOF 1: borrowed well 0: q^" in out
     assert f"; global degree {degree}" in out

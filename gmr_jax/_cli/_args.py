@@ -1,6 +1,7 @@
 """Argument types and checks shared by the `gmr` subcommands (each names the option and the fix)."""
 
 import argparse
+import re
 import sys
 import warnings
 from pathlib import Path
@@ -254,5 +255,29 @@ def load_recordings(paths, column_spec=None) -> tuple[list, list[str]]:
         if not issubclass(w.category, GMRDataWarning):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     for m in msgs:
-        print(f"warning: {m}", file=sys.stderr)
+        print(f"warning: {short_warning(m)}", file=sys.stderr)
     return recs, msgs
+
+
+#: where a warning's fix starts: a clause (after ':', ';' or a full stop) that opens with an imperative
+_FIX = re.compile(r"(?i)(?:[;:]\s+|\.\s+)(?=(?:give|fix|label|scale|record|re-record|measure|excite|use|pass|flip|"
+                  r"check|remove|lower|raise|map|add|cut|convert|keep|set|try|refit|narrow|widen|drop|turn)\b)")
+
+
+def short_warning(msg: str, width: int = 220) -> str:
+    """One line of a warning for the terminal: its first clause (the problem) and its fix (the last clause that
+    opens with an imperative, give, label, record, ..., to the end). The full sentence is in the model file
+    (`gmr show`)."""
+    text = " ".join(str(msg).split())
+    if len(text) <= width:
+        return text
+    cut = [k for k in (text.find(" ("), text.find("; "), text.find(": ", text.find(": ") + 2)) if k > 20]
+    problem = text[:min(cut)] if cut else text[:120]
+    if len(problem) > 130:
+        problem = problem[:127].rsplit(" ", 1)[0] + "..."
+    starts = [m.end() for m in _FIX.finditer(text)]
+    fix = text[starts[-1]:].rstrip(" .") if starts else "see gmr show MODEL --detail"
+    room = max(width - len(problem) - 4, 40)
+    if len(fix) > room:
+        fix = fix[:room - 3].rsplit(" ", 1)[0] + "..."
+    return f"{problem} -> {fix}"

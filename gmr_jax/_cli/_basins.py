@@ -127,13 +127,13 @@ def _probability(gmr, model, args, f, A, x0, settings, out, wells) -> None:
               f"most likely outcome at {most} of {conf.size} points, whose maps are unknown")
 
 
-def _beyond_data(model, model_path, A, load: str) -> str | None:
+def _beyond_data(model, model_path, A, load: str) -> tuple[str, float] | None:
     """Where the grid's loads must push the model beyond the range it was fitted on: the largest restoring
     force each DOF (cell) reached over its training range (the model file's `data_range`, `gmr fit`) against
     the static force the load puts on it (tip: A on every cell of a chain, on the last DOF of independent
     ones; base: A times the masses it carries). Above A* = the smallest such ratio no static equilibrium of
     the load lies in the range, so the trajectory leaves it and the map extrapolates the model (a bound:
-    the dynamic overshoot leaves it at lower A too). A sentence, or None (no data range, or no A above A*)."""
+    the dynamic overshoot leaves it at lower A too). A sentence and A*, or None (no data range, or no A above A*)."""
     d = model.n_dof
     rng = recorded_range(model_path, d)
     if rng is None or np.max(A) <= 0:
@@ -166,7 +166,7 @@ def _beyond_data(model, model_path, A, load: str) -> str | None:
             f"{'cell' if model.topology.name == 'chain' and d > 1 else 'DOF'} {i} reached over its recorded range "
             f"[{rng[i, 0]:.4g}, {rng[i, 1]:.4g}] (the model file's data_range; {where}): those trajectories go "
             f"beyond the motion the model was fitted on, and the map there is the model's extrapolation (a static "
-            f"bound: dynamic overshoot goes beyond at lower A too)")
+            f"bound: dynamic overshoot goes beyond at lower A too)", a_star)
 
 
 def _settle_advice(model, wells, settle_time: float) -> str:
@@ -279,8 +279,10 @@ def run(args) -> int:
     print()
     cat = {key: np.asarray(getattr(bm, key)) for key in ("wells", "config", "result", "x_final", "v_final", "steps")}
     np.savez(out / "basins.npz", f=f, A=A, **cat)
+    beyond = _beyond_data(model, args.model, A, args.load)
     basin_figure(f, A, cat["config"], model.n_dof, out / "basins.png",
-                 title=f"{Path(args.model).stem}: final configuration, {args.load} half-sine (Eq. 25)", wells=wells)
+                 title=f"{Path(args.model).stem}: final configuration, {args.load} half-sine (Eq. 25)", wells=wells,
+                 load=args.load, extrapolated_above=beyond[1] if beyond else None)
     vals, counts = np.unique(cat["config"], return_counts=True)
     for v, c in zip(vals, counts):
         print(f"  {well_label(int(v), model.n_dof, wells):22s} {c:7d} points")
@@ -301,9 +303,8 @@ def run(args) -> int:
           f"compiling {comp:.1f} s" + ("" if comp > 0 else " (compiled programs loaded from the cache)"))
     if args.draws:
         _probability(gmr, model, args, f, A, x0, settings, out, wells)
-    beyond = _beyond_data(model, args.model, A, args.load)
     if beyond:
-        print(f"  note: {beyond}")
+        print(f"  note: {beyond[0]}")
     fast = _beyond_speed(model, args.model, wells, x0)
     if fast:
         print(f"  note: {fast}")

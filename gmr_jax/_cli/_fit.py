@@ -16,9 +16,8 @@ from .._errors import GMRInputError
 from .._model._metadata import fit_metadata
 from .._recordings._recording import length_unit
 from .._reconstruct._sanity import GMRDataWarning
-from ._args import add_columns_option, load_recordings, output_file, positive_int
+from ._args import add_columns_option, load_recordings, output_file, positive_int, short_warning
 from ._progress import stage
-from ._show import _term_table, format_coordination, format_eiv, format_shared_design
 
 
 def register(sub):
@@ -28,7 +27,9 @@ def register(sub):
                    "for several DOFs; units in brackets allowed, 't [ms]' converted; other names: --columns)")
     f.add_argument("--out", required=True, help="model JSON to write (gmr-model/1)")
     add_columns_option(f)
-    f.add_argument("--method", choices=["gmr", "gmc-sindy"], default="gmr")
+    f.add_argument("--method", choices=["gmr", "gmc-sindy"], default="gmr",
+                   help="gmr: local fits at each well, then one global law; gmc-sindy: the baseline, one library on "
+                   "all data")
     f.add_argument("--coordination", choices=["auto", "gls", "hermite", "joint"], default="auto",
                    help="GMR's global step: auto (default: the paper's covariance-weighted route unless it fails "
                    "its own data or its damping feeds energy in, then the joint regression; its damping also where the "
@@ -50,14 +51,20 @@ def register(sub):
                    "is (the differentiation filter's) and resolve the curvature at each well (default: on where x "
                    "was integrated from v or the records are sweeps, off on steady sines and measured "
                    "accelerations; results/derived_accelerations.md)")
-    f.add_argument("--restoring-order", "-r", type=positive_int, default=5)
-    f.add_argument("--damping-order", "-d", type=positive_int, default=5)
+    f.add_argument("--restoring-order", "-r", type=positive_int, default=5,
+                   help="highest power of x in each well's local restoring fit")
+    f.add_argument("--damping-order", "-d", type=positive_int, default=5,
+                   help="highest order of the local damping terms (sgn(v)|v|^j and x^j v)")
     f.add_argument("--threshold", default="auto", help="STLS threshold on normalised coefficients, or 'auto' "
                    "(blocked cross-validation, one-standard-error rule; default)")
-    f.add_argument("--topology", choices=["chain", "independent"], default=None)
+    f.add_argument("--topology", choices=["chain", "independent"], default=None,
+                   help="several DOFs: chain (cells in series, x_i the deformation of cell i; the default) or "
+                   "independent (each DOF its own mass on the ground)")
     f.add_argument("--masses", default=None, help="comma-separated masses (default: from recordings, else 1)")
-    f.add_argument("--no-velocity-damping", action="store_true")
-    f.add_argument("--no-position-damping", action="store_true")
+    f.add_argument("--no-velocity-damping", action="store_true",
+                   help="leave out the terms sgn(v)|v|^j (friction, drag) from the library")
+    f.add_argument("--no-position-damping", action="store_true",
+                   help="leave out the terms x^j v (damping that varies with position) from the library")
     f.add_argument("--figure", default=None, metavar="PNG",
                    help="figure of the fitted restoring and damping forces over the data ranges, and the "
                    "residuals (PNG, with a PDF beside it; default: OUT's name with _fit.png)")
@@ -130,58 +137,20 @@ def run(args) -> int:
     meta = fit_metadata(st)
     meta["warnings"] = load_warnings + list(st["warnings"])
     gmr.save_model(model, args.out, **meta)
-    ranges, routes, design = meta["data_range"], meta.get("coordination", []), meta.get("shared_design", [])
-    print(f"{st['method']} model from {len(recs)} recording(s) -> {args.out}")
-    if unit is not None:
-        print(f"  lengths in {unit} (x, v and a per s, per s^2; from the files' headers): the model's coefficients, "
-              f"wells and ranges are in {unit}")
-    for line in _term_table(model, {"terms": model.terms()}, 4):  # equations, coefficients, std. errors
+    ranges = meta["data_range"]
+    for line in summary_lines(model, st, recs, args.out, unit, ranges, masses_given=masses is not None):
         print(line)
-    from .._reconstruct._sanity import restoring_uncertainty
-
-    for i, rep in enumerate(st["dofs"]):
-        if rep.equilibria.size:
-            band = "" if model.covariance is None else (
-                f"; the band on its restoring force "
-                f"±{100 * restoring_uncertainty(model.stiffness[i], model.covariance[i], *ranges[i]):.2g} %"
-                " (2 sd, RMS over the recorded range: the model file's covariance, the fit figure's band)")
-            print(f"  DOF {i}: wells recorded about x = {np.round(rep.equilibria, 6).tolist()} (the records' means; "
-                  f"the model's own equilibria: gmr show), global orders "
-                  f"K_r={rep.stats['K_r']}, K_d={rep.stats['K_d']}{band}")
-    if model.n_dof > 1:
-        print(f"  topology: {model.topology.name} (" + ("x_i is cell i's deformation, x_i - x_(i-1); "
-              "--topology independent for separate masses)" if model.topology.name == "chain" else
-              "each DOF on its own; --topology chain for cells in series)"))
-    for line in format_coordination(routes):
-        print(line)
-    for line in format_shared_design(design):
-        print(line)
-    for name, sc in st["training"].items():
-        band = "" if not any(b is not None for b in sc.get("r2_in_band") or []) else (
-            f" (R2 in the response's band {[None if b is None else round(b, 5) for b in sc['r2_in_band']]})")
-        print(f"  training {name}: R2 {np.round(sc['r2'], 5).tolist()}, NRMSE {np.round(sc['nrmse'], 5).tolist()}{band}")
-    if "resolution" in st:
-        print("What each well's data resolved (and the excitation that would resolve what they did not):")
-        print(str(st["resolution"]))
-    for line in format_eiv(routes):
-        print(line)
-    for line in _derivation_notes(recs):
-        print(line)
-    forced = any(r.force is not None and np.any(np.asarray(r.force) != 0) for r in recs)  # a force input: a warning
-    if masses is None and all(r.masses is None for r in recs) and model.n_dof == 1 and not forced:  # a chain's too
-        print("  note: no masses in the recordings and no --masses: taken as 1, so every coefficient is a force "
-              "per unit mass (pass --masses M or a column m in the CSV for forces in the recordings' units)")
     if png is not None:
         stage(f"writing the figure {png} (and .pdf)")
         from ..plots._fit import fit_figure
         from ..plots._save import save_with_pdf
 
         save_with_pdf(fit_figure(model, recs, title=f"{st['method']} model ({Path(args.out).name}) against its "
-                                 f"recordings"), png)
-        print(f"  figure: {png} (and {png.with_suffix('.pdf').name}): restoring and damping forces over the "
-              f"data ranges, residuals")
-    for w in st["warnings"]:
-        print(f"warning: {w}", file=sys.stderr)
+                                 f"recordings", unit=unit), png)
+        print(f"  figure: {png} (and .pdf): forces over the data ranges with their 95 % band, residuals")
+    print(f"  details (standard errors, what each well resolved, coordination): gmr show {args.out} --detail")
+    for w in st["warnings"]:  # the loading warnings were printed as the files were read
+        print(f"warning: {short_warning(w).replace('gmr show MODEL', f'gmr show {args.out}')}", file=sys.stderr)
     n_warn = len(load_warnings) + len(st["warnings"])
     if n_warn and args.strict:
         print(f"gmr fit: {n_warn} warning(s) with --strict: exit status 3 (model written to "
@@ -191,15 +160,52 @@ def run(args) -> int:
     return 0
 
 
+def summary_lines(model, st, recs, out, unit, ranges, masses_given=False) -> list[str]:
+    """What `gmr fit` prints on stdout: the model, its wells, how well it fits, what was estimated."""
+    from .._reconstruct._sanity import restoring_uncertainty
+    from ._show import equilibria
+
+    lu = f" {unit}" if unit else ""
+    lines = [f"{st['method']} model from {len(recs)} recording(s) -> {out}"
+             + (f" (lengths in {unit}, forces in the recordings' units)" if unit else "")]
+    lines += ["  " + e for e in model.equations(precision=4)]
+    eqs = equilibria(model.stiffness)
+    for i in range(model.n_dof):
+        stable = [x for x, s in eqs[i] if s > 0]
+        saddles = [x for x, s in eqs[i] if s < 0]
+        band = "" if model.covariance is None else (
+            f"; restoring-force band ±{100 * restoring_uncertainty(model.stiffness[i], model.covariance[i], *ranges[i]):.2g} %")
+        lines.append(f"  DOF {i}: stable wells at x = {', '.join(f'{x:.4g}' for x in stable) or 'none'}{lu}"
+                     + (f", saddle{'s' if len(saddles) > 1 else ''} at {', '.join(f'{x:.4g}' for x in saddles)}{lu}"
+                        if saddles else "") + band)
+    if model.n_dof > 1:
+        lines.append(f"  topology: {model.topology.name}" + (" (x_i: cell i's deformation; --topology independent for "
+                     "separate masses)" if model.topology.name == "chain" else " (--topology chain for cells in series)"))
+    tr = st.get("training") or {}
+    if tr:
+        r2 = [v for sc in tr.values() for v in np.atleast_1d(sc["r2"])]
+        nr = [v for sc in tr.values() for v in np.atleast_1d(sc["nrmse"])]
+        span = lambda v, p: f"{min(v):.{p}g}" + ("" if f"{min(v):.{p}g}" == f"{max(v):.{p}g}" else f"-{max(v):.{p}g}")  # noqa: E731
+        lines.append(f"  fit to the recordings: R^2 {span(r2, 6)}, force NRMSE {span(nr, 3)}")
+    lines += _derivation_notes(recs)
+    forced = any(r.force is not None and np.any(np.asarray(r.force) != 0) for r in recs)  # a force input: a warning
+    if not masses_given and all(r.masses is None for r in recs) and model.n_dof == 1 and not forced:
+        lines.append("  masses: none given, taken as 1 (coefficients per unit mass; --masses M for forces)")
+    return lines
+
+
 def _derivation_notes(recs) -> list[str]:
-    """What was estimated rather than measured, by source (a note per kind of recording)."""
+    """What was estimated rather than measured, by signal and source (one line per distinct case); `recs` as
+    loaded (a missing v or a is estimated by the fit)."""
     notes = []
-    integrated = [r for r in recs if "x" in r.derived and r.integration]
-    if integrated:
-        srcs = sorted({r.integration.get("from", "?") for r in integrated})
-        notes.append(f"  note: x was integrated from {' and '.join(srcs)} (drift below the cut-off removed, the slow shift of "
-                     f"the mean position restored from the force balance; see README, velocity-only records)"
-                     + ("; accelerations differentiated from v (Savitzky-Golay)" if "v" in srcs else ""))
-    if any("x" not in r.derived and (r.v is None or r.a is None) for r in recs):
-        notes.append("  note: velocities/accelerations were estimated from x (Savitzky-Golay, see README)")
-    return notes
+    for r in recs:
+        info = r.integration or {}
+        parts = [f"{k} integrated from {info.get('from', '?')}" for k in ("x", "v") if k in r.derived]
+        if r.v is None:
+            parts.append("v differentiated from x")
+        if r.a is None:
+            parts.append(f"a differentiated from {r.derivative_source()}")
+        if parts:
+            notes.append(", ".join(parts))
+    how = lambda n: "drift removed; Savitzky-Golay" if "integrated" in n else "Savitzky-Golay"  # noqa: E731
+    return [f"  estimated: {n} ({notes.count(n)} of {len(recs)} recording(s); {how(n)})" for n in dict.fromkeys(notes)]

@@ -1,5 +1,5 @@
 """The `gmr` command line: one module per subcommand (`register(sub)` adds its parser, `run(args)`
-does the work); formats and shapes are those of the contracts (README, "File formats").
+does the work); formats and shapes are those of the contracts (docs/formats.md).
 
 Exit status: 0 success; 1 the computation failed (its RESULTS code is named); 2 the input was
 wrong (the message names the file, option or value and the fix); 3 an internal error (a bug in
@@ -30,6 +30,17 @@ def _version() -> str:
         return "0+unknown"
 
 
+class _DefaultsShown(argparse.HelpFormatter):
+    """Help text with each option's default appended (`(default: 5)`), where it has one to show."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if ("%(default)" in text or "default" in text.lower() or action.default in (None, False, argparse.SUPPRESS)
+                or not action.option_strings or action.required):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
 def build_parser():
     p = argparse.ArgumentParser(prog="gmr", description="Global model reconstruction of multi-stable structures")
     p.add_argument("--version", action="version", version=f"gmr_jax {_version()}",
@@ -37,6 +48,7 @@ def build_parser():
     sub = p.add_subparsers(dest="cmd", required=True)
     for cmd in COMMANDS:
         parser = cmd.register(sub)
+        parser.formatter_class = _DefaultsShown  # every option's default in --help
         if parser.prog.split()[-1] in _progress.LONG:
             parser.add_argument("--no-progress", action="store_true",
                                 help="no progress lines on stderr (also GMR_PROGRESS=0)")

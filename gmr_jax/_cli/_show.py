@@ -86,6 +86,9 @@ def register(sub):
                        "stability, energy barriers, training metadata and warnings")
     p.add_argument("model", help="gmr-model/1 JSON (e.g. from gmr fit)")
     p.add_argument("--precision", type=int, default=4, help="significant digits of the numbers (default 4)")
+    p.add_argument("--detail", action="store_true",
+                   help="also what each well's data resolved (per term), the coordination route and its reasons, "
+                   "the noise corrections, the cells that shared a design, and every other key of the file")
     p.set_defaults(fn=run)
     return p
 
@@ -217,7 +220,7 @@ def _inside(x, rng) -> bool:
     return rng is None or rng[0] <= x <= rng[1]
 
 
-def describe(path, precision: int = 4) -> str:
+def describe(path, precision: int = 4, detail: bool = False) -> str:
     """The text `gmr show` prints for the model file at `path` (GMRInputError on a bad file)."""
     from .._errors import GMRInputError
     from .._model._io import load_model
@@ -226,10 +229,10 @@ def describe(path, precision: int = 4) -> str:
         raise GMRInputError(f"--precision must be >= 1, got {precision}")
     model = load_model(path)  # every key checked
     d = json.loads(Path(path).read_text(encoding="utf-8-sig"))
-    return _describe(model, d, str(path), precision)
+    return _describe(model, d, str(path), precision, detail)
 
 
-def _describe(model, d: dict, name: str, p: int) -> str:
+def _describe(model, d: dict, name: str, p: int, detail: bool = False) -> str:
     n = model.n_dof
     masses = [_g(m, p) for m in np.asarray(model.masses)]
     out = [f"{name}: {d['format']}, {n} DOF{'s' if n > 1 else ''}, topology {model.topology.name}, "
@@ -297,12 +300,18 @@ def _describe(model, d: dict, name: str, p: int) -> str:
                 out.append(f"  {rec}: " + "; ".join(parts).replace("r2", "R^2").replace("nrmse", "NRMSE"))
     elif rng is None:
         out.append("  not recorded in this file")
+    warns = d.get("warnings") or []
+    out += ["", f"Warnings stored with the model: {len(warns) or 'none'}"]
+    out += [f"  - {w}" for w in warns]
+    if not detail:
+        out += ["", "(what each well resolved, the coordination and the noise corrections: --detail)"]
+        return "\n".join(out)
     res = d.get("resolution")
     if isinstance(res, list) and res:
         from .._reconstruct._resolution import format_resolution
 
         out += ["", "What each well's data resolved (F, F', F'' needed at every well; NO = needed, unresolved):"]
-        out += format_resolution(res)
+        out += format_resolution(res, detail=True)
     routes = d.get("coordination")
     if isinstance(routes, list) and routes:
         out += ["", "Coordination (the route per DOF and why):"]
@@ -312,9 +321,6 @@ def _describe(model, d: dict, name: str, p: int) -> str:
     if isinstance(design, list) and design:
         out += ["", "Cells of one design (restoring orders lent as a prior to the weakly excited cells):"]
         out += format_shared_design([r if isinstance(r, dict) else {} for r in design])
-    warns = d.get("warnings") or []
-    out += ["", f"Warnings stored with the model: {len(warns) or 'none'}"]
-    out += [f"  - {w}" for w in warns]
     extra = [k for k in d if k not in _KNOWN]
     if extra:
         out += ["", "Other keys:"]
@@ -325,5 +331,5 @@ def _describe(model, d: dict, name: str, p: int) -> str:
 
 
 def run(args) -> int:
-    print(describe(args.model, args.precision))
+    print(describe(args.model, args.precision, args.detail))
     return 0

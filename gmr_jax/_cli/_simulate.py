@@ -13,7 +13,7 @@ import warnings
 
 import numpy as np
 
-from ._args import add_columns_option, load_recordings, output_dir
+from ._args import add_columns_option, load_recordings, output_dir, short_warning
 from ._progress import stage
 
 
@@ -24,8 +24,9 @@ def register(sub):
     s.add_argument("recording", help="NPZ, CSV or MATLAB .mat recording with x and the input (base_acc or force)")
     s.add_argument("--out", required=True, help="folder for simulate.png/.pdf, simulate.json and simulate.md")
     add_columns_option(s)
-    s.add_argument("--x-unit", default="recording units",
-                   help="unit of x for the figure's axes, e.g. m or rad (default: 'recording units')")
+    s.add_argument("--x-unit", default=None,
+                   help="unit of x for the figure's axes, e.g. m or rad (default: the unit the recording's header "
+                   "states, else 'recording units')")
     s.set_defaults(fn=run)
     return s
 
@@ -70,7 +71,7 @@ def run(args) -> int:
         sol = gmr.free_run(model, rec, throw=False)
     said = [str(w.message) for w in caught if issubclass(w.category, gmr.GMRDataWarning)]
     for w in said:
-        print(f"gmr simulate: warning: {w}", file=sys.stderr)
+        print(f"gmr simulate: warning: {short_warning(w)}", file=sys.stderr)
     fr = sol.value
     ok = not sol.stats["message"]
     doc = {"model": args.model, "recording": args.recording, "result": sol.stats["result"],
@@ -92,7 +93,8 @@ def run(args) -> int:
                               "model": [int(c) for c in fr.crossings[1]]})
     lines = _horizon_lines(fr)
     stage(f"writing {out}")
-    free_run_figure(fr, out / "simulate.png", x_unit=args.x_unit,
+    x_unit = args.x_unit or rec.length_unit or "recording units"
+    free_run_figure(fr, out / "simulate.png", x_unit=x_unit,
                     title=f"{args.model} on {rec.name}: " + ("free run under the recorded input" if rec.driven
                                                              else "free decay (no input column)"))
     (out / "simulate.json").write_text(json.dumps(doc, indent=1) + "\n")

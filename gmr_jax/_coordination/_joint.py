@@ -518,8 +518,8 @@ def joint_coordinate(
     and `joint_unconstrained`: the best candidate of all minus the chosen one, zeros unless the
     conflict exceeds `CONFLICT`; `joint_damping_alternative_orders`, `_delta`, `_velocity`, `_position`: the best
     admissible candidate of the chosen degree with another set of velocity terms, its score less the chosen one's
-    and its damping coefficients less the chosen ones, None / inf / zeros when there is none: rule 14 of
-    `reconstruct`'s checks; `joint_truncation_ratio`, `_tail`: where the chosen degree is the cap, the series'
+    and its damping coefficients less the chosen ones, None / inf / zeros when there is none: read by
+    `reconstruct`'s damping check; `joint_truncation_ratio`, `_tail`: where the chosen degree is the cap, the series'
     convergence ratio and the RMS of its estimated tail on the span, whose covariance the returned one holds
     (`_truncation`), 0 elsewhere; `joint_velocity_noise`: whether the columns were corrected for `v_noise`;
     `joint_velocity_orders_dropped`: the velocity terms the score chose and their robust covariance did not keep

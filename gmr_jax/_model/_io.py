@@ -1,4 +1,4 @@
-"""Read and write models in the "gmr-model/1" JSON format (see README, "File formats")."""
+"""Read and write models in the "gmr-model/1" JSON format (docs/formats.md)."""
 
 import json
 import os
@@ -39,7 +39,7 @@ def model_from_dict(d: dict, source: str = "model") -> GlobalModel:
     if not isinstance(d, dict) or d.get("format") != FORMAT:
         raise GMRInputError(
             f"{source}: not a {FORMAT} model (missing or wrong 'format' key); "
-            f"write it with gmr fit or see the README's model format"
+            f"write it with gmr fit or see the model format in docs/formats.md"
         )
     topo = d.get("topology", "independent")
     if not isinstance(topo, str) or topo not in TOPOLOGIES:

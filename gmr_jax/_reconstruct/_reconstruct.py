@@ -30,6 +30,7 @@ from .._fit._threshold import default_thresholds, select_threshold
 from .._model._model import GlobalModel
 from .._model._predict import forces
 from .._recordings._derivatives import TONAL, band_edge, tonal_fraction
+from .._recordings._inputs import as_recordings
 from .._recordings._recording import Recording, length_unit, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
@@ -147,6 +148,7 @@ def _resolve(recordings, masses, topology, min_recordings=2, what="fit", exclude
         warnings += _sanity.check_units(r.name, r, topology)
         warnings += _sanity.check_acceleration_offset(r.name, r, topology)
     recs = [r.complete(topology, exclude_center=exclude_center) for r in recs]  # True: x'' leaves out x(t)
+    warnings += [w for r in recs for w in _sanity.check_force_units(r.name, r, topology, masses)]
     return recs, masses, topology, warnings
 
 
@@ -873,8 +875,9 @@ def reconstruct(
 
     **Arguments:**
 
-    - `recordings`: one per equilibrium (single DOF) or per configuration (chain). Missing
-      v/a are estimated from x (Savitzky-Golay).
+    - `recordings`: one per equilibrium (single DOF) or per configuration (chain): `Recording`s, file
+      paths (`load_recording`), or dicts or structured arrays of named signals (`{"t": t, "x": x,
+      "base_acc": b}`). Missing v/a are estimated from x (Savitzky-Golay).
     - `library`: local library orders r, d (Eqs. 5-7).
     - `solver`, `select`: STLS settings; `select=None` uses `solver.threshold` as given.
     - `topology`: "chain" (default for several DOFs) or "independent".
@@ -1011,6 +1014,7 @@ def reconstruct(
     with different masses, inconsistent shapes) raise `GMRInputError` before anything is
     computed.
     """
+    recordings = as_recordings(recordings)  # paths and arrays as well as Recordings
     if coordination == "evidence":
         return _evidence(recordings, settings, library, masses, topology, well_tol, throw, progress)
     given = dict(locals())  # the call's arguments, for rule 14d's refit (`_window_check`)
@@ -1325,6 +1329,7 @@ def gmc_sindy(
     support was still changing at `max_iter` is kept (as pysindy does) with a warning in
     `stats["warnings"]`, beside the data checks of `reconstruct` that apply to one global fit
     (masses, clipping, missing input, training R²); a non-finite fit is a failure (`throw`)."""
+    recordings = as_recordings(recordings)  # paths and arrays as well as Recordings
     relieve_map_pressure()  # a long session's compiled programs (`_config.map_pressure`)
     failure = _Failure("gmc_sindy", throw)
     recs, masses, topology, warnings = _resolve(recordings, masses, topology, min_recordings=1)

@@ -212,7 +212,7 @@ class ResolutionReport:
                 cells.append(f"{mark} {t.t:.3g} / {100 * t.impact:.2g} %" + ("" if t.needed else " (not needed)"))
             miss = w.missing()
             adv = max((t.advised_ratio for t in miss if t.advised_ratio is not None), default=None)
-            extra = "".join(f" ({t.name}, beyond the oracle: {100 * t.advised_ratio:.2g} %)" for t in w.terms
+            extra = "".join(f" ({t.name}, beyond F, F', F'': {100 * t.advised_ratio:.2g} %)" for t in w.terms
                             if not t.needed and not t.resolved and t.advised_ratio is not None)
             lines.append(f"| {w.dof} | {w.equilibrium:.5g} | {100 * w.ratio:.3g} | {w.band[0]:.3g}-{w.band[1]:.3g} | "
                          f"{w.f_natural:.3g} | " + " | ".join(cells) + f" | {', '.join(NAMES[t.order] for t in miss) or '-'}"
@@ -226,7 +226,7 @@ class ResolutionReport:
                   f"{100 * BOX_MARGIN:g} % either side), % of its RMS; ok = bound <= {100 * BOUND_FRACTION:g} %; "
                   "**NO** = needed (F, F', F'') and unresolved; advised amplitude: the response amplitude (% of the "
                   "interwell distance) at which they would be, and in parentheses F''' where the global model's own "
-                  "F''' moves its force by more than the bound (beyond the curvature oracle).")
+                  "F''' moves its force by more than the bound (beyond what F, F', F'' at the wells fix).")
         nowhere = self.unresolved_everywhere()
         lines = [self.table(), "", legend]
         if nowhere:
@@ -396,12 +396,15 @@ def resolution_report(recs, targets, groups, reports, model, library, masses, to
     return ResolutionReport(wells=wells)
 
 
-def format_resolution(entries: list[dict]) -> list[str]:
-    """Lines `gmr show` prints for a model file's "resolution" key (`ResolutionReport.to_dict`)."""
+def format_resolution(entries: list[dict], detail: bool = False) -> list[str]:
+    """Lines `gmr show` prints for a model file's "resolution" key (`ResolutionReport.to_dict`); `detail`: each
+    term's t (|coefficient| / standard error) and bound (% of the global force its two standard errors move)."""
     out = []
     for w in entries:
         try:
             terms = " ".join(f"{t['name']} {'ok' if t['resolved'] else ('NO' if t['needed'] else 'no')}"
+                             + (f" (coefficient {t.get('coef') or 0:.4g} +- {t.get('se') or 0:.2g}, bound "
+                                f"{100 * (t.get('impact') or 0):.2g} %)" if detail else "")
                              for t in w["terms"])
             ratio = w["amplitude"] / w["distance"] if w.get("distance") else float("nan")
             out.append(f"  DOF {w['dof']}, well x = {w['equilibrium']:.5g}: amplitude {100 * ratio:.3g} % of the "

@@ -1020,3 +1020,126 @@ def check_damping_choice(dof: int, velocity_damping, position_damping, alt_veloc
         f"times its force at the bound); simulations, hops and basins faster than that inherit the choice. Record "
         f"faster motion (larger vibrations, or a record nearer the cross-well speeds) to decide it"
     ]
+
+
+#: `check_force_units`: a measured force that balances this many times more, or less, inertia than the masses and
+#: units given imply is reported (a length unit off by 1000 gives 1000; the clean built-in records' margin:
+#: results/units_check.md)
+FORCE_UNITS_FACTOR = 3.0
+#: `check_force_units`: the relative standard error of the balance's inertia factor above which the record cannot
+#: tell (a steady single sine: its inertia and stiffness columns are collinear)
+FORCE_UNITS_MAX_SE = 0.1
+#: length-unit slips a factor is named by: factor of the kinematics over what the force implies -> what was written
+UNIT_SLIPS = {1e3: ("mm", "m", "1e-3"), 1e-3: ("m", "mm", "1e3"), 1e2: ("cm", "m", "1e-2"), 1e-2: ("m", "cm", "1e2"),
+              1e6: ("µm", "m", "1e-6"), 1e-6: ("m", "µm", "1e6"), 25.4: ("mm", "in", "1/25.4"),
+              1 / 25.4: ("in", "mm", "25.4")}
+
+
+def force_balance_factors(rec, topology, masses) -> list:
+    """Per DOF, (mu, its standard error) of the regression force = mu (m a) + F(x, v) that `check_force_units`
+    reads (None for a DOF without a force, or a record without one). `rec` a completed `Recording`."""
+    from .._recordings._derivatives import band_edge
+
+    if rec.force is None or not np.any(np.asarray(rec.force) != 0) or rec.a is None or rec.x is None:
+        return []
+    _, f = rec.inputs()
+    a, x, v = (np.asarray(z, float) for z in (rec.a, rec.x, rec.v))
+    n = x.shape[0]
+    keep = slice(n // 20, n - n // 20)  # the ends: estimated derivatives and the low-pass's edges
+    inertia = np.asarray(topology.carried(a * np.asarray(masses, float)[None, :]))
+    load = np.asarray(topology.carried(np.asarray(f, float)))
+    out = []
+    for i in range(x.shape[1]):
+        if not np.any(load[:, i] != 0):
+            out.append(None)
+            continue
+        q = x[:, i] - np.mean(x[:, i])
+        q = q / (np.std(q) or 1.0)
+        w = v[:, i] / (np.std(v[:, i]) or 1.0)
+        cols = np.column_stack([inertia[:, i], load[:, i]] + [q ** k for k in range(6)]
+                               + [w, q * w, q ** 2 * w, w ** 3])
+        # every column through one low-pass at 1.5 x the response's band edge: the equation holds filtered, and
+        # the noise an estimated a carries far above the band (it would pull mu towards 0) is gone
+        spec = np.fft.rfft(cols, axis=0)
+        spec[np.fft.rfftfreq(n, float(rec.dt)) > 1.5 * band_edge(x[:, i], float(rec.dt))] = 0.0
+        cols = np.fft.irfft(spec, n, axis=0)[keep]
+        target, cols = cols[:, 1], np.delete(cols, 1, axis=1)
+        norm = np.linalg.norm(cols, axis=0)
+        if norm[0] == 0:
+            out.append(None)
+            continue
+        norm = np.where(norm > 0, norm, 1.0)
+        coef, *_ = np.linalg.lstsq(cols / norm, target, rcond=None)
+        resid = target - (cols / norm) @ coef
+        dof = max(len(resid) - cols.shape[1], 1)
+        cov = np.linalg.pinv((cols / norm).T @ (cols / norm)) * (resid @ resid / dof)
+        out.append((float(coef[0] / norm[0]), float(np.sqrt(max(cov[0, 0], 0.0)) / norm[0])))
+    return out
+
+
+def check_force_units(name: str, rec, topology, masses, factor: float = FORCE_UNITS_FACTOR) -> list[str]:
+    """Whether a force-driven record's force balance holds in the units and masses given.
+
+    The equation of motion m a + F(x, v) = force (chain: per cell, with the carried inertia and force) is
+    regressed with the inertia's factor mu free: force = mu (m a) + F(x, v), F a polynomial in x (to x^5) and v
+    (v, x v, x^2 v, v^3) about the record's mean. In consistent units mu = 1 whatever F is; lengths written in
+    the wrong unit scale x, v and a by a factor s that F absorbs (a polynomial stays one) and the inertia does
+    not: mu = 1/s. A record whose mu lies beyond `factor` (`FORCE_UNITS_FACTOR`) either way, with a standard error below
+    `FORCE_UNITS_MAX_SE` of it, is reported with s and the slip it points to (`UNIT_SLIPS`). Skipped: records
+    without a nonzero force (a base excitation scales with the kinematics: no unit shows) and DOFs whose record
+    cannot separate inertia from stiffness.
+
+    **Arguments:** `name`, the record's name; `rec`, a completed `Recording` (a filled); `topology`, the
+    topology; `masses` (D,). **Returns:** one sentence per DOF reported."""
+    out = []
+    for i, fit in enumerate(force_balance_factors(rec, topology, masses)):
+        if fit is None:
+            continue
+        mu, se = fit
+        if mu <= 0 or se > FORCE_UNITS_MAX_SE * mu:
+            continue
+        s = 1.0 / mu
+        if max(s, mu) < factor:
+            continue
+        slip = min(UNIT_SLIPS, key=lambda k: abs(np.log(s / k)))
+        if abs(np.log(s / slip)) < np.log(1.5):
+            real, said, scale = UNIT_SLIPS[slip]
+            why = (f"lengths in {real} where the file says {said} (factor {slip:g}): label the columns "
+                   f"'x [{real}]', or scale x, v, a by {scale} (--columns 'x=COLUMN*{scale}')")
+        else:
+            why = "check the units of x, v, a, the force and the masses"
+        out.append(f"{name}: units: DOF {i}'s x, v, a are {s:.3g} times what its force and masses imply "
+                   f"(force balance): {why}")
+    return out
+
+
+def unit_checks(recordings, *, masses=None, topology=None, factor: float = FORCE_UNITS_FACTOR) -> list[str]:
+    """The units checks `reconstruct` runs, on recordings alone (before any fit): per recording, whether its
+    measured v and a are the derivatives of its x in the same units, and, for a force-driven record, whether
+    its force balance holds in the units and masses given (`check_force_units`: a length written in mm where
+    the file says m is named with the factor 1000).
+
+    **Arguments:**
+
+    - `recordings`: `Recording`s, file paths or dicts of arrays (as `reconstruct` takes them).
+    - `masses`, `topology`: as `reconstruct` (default: the recordings' masses, else 1; a chain for several DOFs).
+    - `factor`: how far the force balance's inertia factor may be from 1, either way, before it is reported.
+
+    **Returns:** the sentences, each naming the record, the problem and the fix (empty: consistent)."""
+    from .._recordings._inputs import as_recordings
+    from .._recordings._recording import validate
+    from .._topology import as_topology
+
+    recs = [validate(r, r.name) for r in as_recordings(recordings)]
+    if not recs:
+        return []
+    d = recs[0].n_dof
+    topo = as_topology(("chain" if d > 1 else "independent") if topology is None else topology)
+    found = [r.masses for r in recs if r.masses is not None]
+    m = np.asarray(masses if masses is not None else (found[0] if found else np.ones(d)), float).reshape(-1)
+    out = []
+    for r in recs:
+        out += check_units(r.name, r, topo)
+        done = r.complete(topo)
+        out += check_force_units(r.name, done, topo, m, factor)
+    return out

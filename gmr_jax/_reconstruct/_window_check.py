@@ -72,7 +72,7 @@ def check(fit, recordings, model, topology, exclude_center: bool, say=None) -> t
     if _ACTIVE.get() or not derived_from_x(recordings) or not nonlinear(model):
         return [], {}
     if say is not None:
-        say("damping law against the derivative window (rule 14d)")
+        say("damping law against the derivative window")
     token = _ACTIVE.set(True)
     try:
         with warnings.catch_warnings():

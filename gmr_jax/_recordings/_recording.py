@@ -168,7 +168,7 @@ class Recording:
         `derivation` then says, per derived signal, what it was differentiated from, the
         order, the window of each column and whether the centre was left out (the noise model
         of `reconstruct`'s local fits, `_fit/_target_noise.py`). `window_scale`: the automatic
-        windows scaled by it (odd, at least polyorder + 2; `reconstruct`'s rule 14d refits at 0.7)."""
+        windows scaled by it (odd, at least polyorder + 2; `reconstruct` refits at 0.7 to test the damping against the window)."""
         x, v, a, derived = self.x, self.v, self.a, list(self.derived)
         info = self.integration
         how = dict(self.derivation or {})
@@ -697,6 +697,50 @@ def _read_npz(path: Path, src: str, raw: bool = False):
     return Recording(**arrays, name=path.stem)
 
 
+def _split_units(raw: dict) -> tuple[dict, dict]:
+    """A lab file's variables by their names with any unit in brackets taken off ('disp [mm]' -> 'disp', also kept
+    under its full name), and the unit of each such name."""
+    out, units = dict(raw), {}
+    for key, val in raw.items():
+        m = _UNIT.match(str(key))
+        if m and m.group(1).strip() and m.group(1).strip() not in raw:
+            out[m.group(1).strip()] = val
+            units[m.group(1).strip()] = units[str(key)] = m.group(2).strip()
+    return out, units
+
+
+#: the contract's column name of each mapped field (`_column_scales` reads the kind from it)
+_FIELD_COLUMN = {"x": "x0", "v": "v0", "a": "a0", "base_acc": "base_acc", "force": "f0", "masses": "m0",
+                 "equilibrium": "equilibrium0"}
+
+
+def _mapped_units(fields: dict, columns: dict, units: dict, src: str) -> tuple[dict, str | None]:
+    """The mapped fields in one coherent set of units, where each maps one variable whose header carries a unit
+    (`columns={'x': 'disp'}` with a column 'disp [mm]'), as a CSV with the contract's names would be read
+    (`_column_scales`); a field computed from numbers or several variables is taken as it comes. Returns the fields
+    and the unit their lengths are in (None: no unit stated)."""
+    def unit_of(field):
+        spec = columns.get(field, field)
+        name = spec.strip().lstrip("+-").strip() if isinstance(spec, str) else None
+        return units.get(name)
+
+    fields = dict(fields)
+    t_unit = unit_of("t")
+    if t_unit is not None and "t" in fields:
+        factor = {k.lower(): f for k, f in TIME_UNITS.items()}.get(t_unit.lower())
+        if factor is None:
+            raise GMRInputError(f"{src}: the time column's unit '{t_unit}' is not one of {sorted(TIME_UNITS)}")
+        fields["t"] = np.asarray(fields["t"], float) * factor
+    named = [(f, unit_of(f)) for f in _FIELD_COLUMN if f in fields and unit_of(f) is not None]
+    if not named:
+        return fields, None
+    scales, unit = _column_scales([_FIELD_COLUMN[f] for f, _ in named], [u for _, u in named], src,
+                                  [f"{f} [{u}]" for f, u in named])
+    for (f, _), k in zip(named, scales):
+        fields[f] = np.asarray(fields[f], float) * k
+    return fields, unit
+
+
 def load_recording(path, columns: dict | None = None) -> Recording:
     """Read and validate a recording (NPZ with keys t, x, [v, a, base_acc, force, masses], CSV
     with a header row t, x0.., v0.., a0.., base_acc or f0.., or MATLAB .mat with the NPZ's names).
@@ -732,7 +776,10 @@ def load_recording(path, columns: dict | None = None) -> Recording:
             from ._mapping import map_columns, read_mat
 
             raw = read_mat(path, src) if suffix == ".mat" else read(path, src, raw=True)
-            rec = Recording(**map_columns(raw, columns, src), name=path.stem)
+            raw, units = _split_units(raw)
+            fields = map_columns(raw, columns, src)
+            fields, unit = _mapped_units(fields, columns or {}, units, src)
+            rec = Recording(**fields, name=path.stem, length_unit=unit)
         else:
             rec = read(path, src)
     except OSError as e:

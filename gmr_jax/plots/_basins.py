@@ -60,7 +60,8 @@ def well_label(config: int, n_dof: int, wells=None) -> str:
     return f"{label} (x = {w[config]:.4g})" if config < w.size else label
 
 
-def basin_figure(f, A, config, n_dof: int, path=None, title: str = "", *, ax=None, wells=None) -> Figure:
+def basin_figure(f, A, config, n_dof: int, path=None, title: str = "", *, ax=None, wells=None, load: str | None = None,
+                 extrapolated_above: float | None = None) -> Figure:
     """The final configuration over the (f, A) grid, one colour per configuration (legend in
     the 0-1-1-0-0 style, cell 0 first; dark grey: not settled or failed). A configuration has
     the same colour in every figure of the structure (`config_colour`), so maps side by side
@@ -68,7 +69,10 @@ def basin_figure(f, A, config, n_dof: int, path=None, title: str = "", *, ax=Non
     a new figure. Saved to `path` when given (and as PDF beside it); returns the `Figure`. `wells`: the stable
     equilibria per DOF ((dof, k), NaN-padded), for a one-DOF legend that says where each well is,
     and the digit base of the configuration codes where a DOF has more than two wells (without
-    them the codes are read as bit fields, and a code beyond 2^n_dof is refused)."""
+    them the codes are read as bit fields, and a code beyond 2^n_dof is refused). `load`: "tip" (A a force, N)
+    or "base" (A a base acceleration, m/s^2), for the amplitude axis's unit (None: both named). `extrapolated_above`: the amplitude
+    above which the load's static deflection alone leaves the range the model was fitted on; that part of the map
+    is the model's extrapolation and is hatched. The frequency axis starts at 0 Hz."""
     config = np.asarray(config)
     base = 2 if wells is None else well_base(wells)
     if config.size and int(config.max()) >= base**n_dof:
@@ -90,8 +94,23 @@ def basin_figure(f, A, config, n_dof: int, path=None, title: str = "", *, ax=Non
     handles = [Rectangle((0, 0), 1, 1, color=colors[k]) for k in range(len(values))]
     ax.legend(handles, [well_label(v, n_dof, wells) for v in values], title="final configuration",
               bbox_to_anchor=(1.02, 1), loc="upper left", fontsize=7, ncol=1 if len(values) <= 16 else 2)
+    f_arr, A_arr = np.asarray(f, float), np.asarray(A, float)
+    if extrapolated_above is not None and A_arr.size and extrapolated_above < A_arr.max():
+        step = float(np.diff(A_arr).max()) if A_arr.size > 1 else 0.0
+        top = float(A_arr.max()) + 0.5 * step
+        lo = max(float(extrapolated_above), float(A_arr.min()) - 0.5 * step)
+        ax.add_patch(Rectangle((0.0, lo), float(f_arr.max()) * 2 + 1.0, top - lo, fill=False, hatch="///",
+                               edgecolor="w", lw=0.0))
+        ax.axhline(lo, color="w", ls="--", lw=1.2)
+        handles.append(Rectangle((0, 0), 1, 1, facecolor="0.5", hatch="///", edgecolor="w"))
+        ax.legend(handles, [well_label(v, n_dof, wells) for v in values] + ["extrapolated (beyond the fitted x)"],
+                  title="final configuration", bbox_to_anchor=(1.02, 1), loc="upper left", fontsize=7,
+                  ncol=1 if len(values) <= 16 else 2)
+    if f_arr.size:
+        ax.set_xlim(0.0, float(f_arr.max()) + (0.5 * float(np.diff(f_arr).max()) if f_arr.size > 1 else 0.0))
     ax.set_xlabel("actuation frequency f [Hz]")
-    ax.set_ylabel("actuation amplitude A")
+    ax.set_ylabel("actuation amplitude A " + {"base": "[m/s²] (base acceleration)", "tip": "[N] (tip force)"}.get(
+        load, "[N] (tip force; m/s² for a base load)"))
     ax.set_title(title or "deployment basins (tip half-sine, Eq. 25)")
     if path is not None:  # PNG (or the suffix given) and a PDF beside it
         save_with_pdf(fig, path)

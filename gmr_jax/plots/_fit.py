@@ -8,8 +8,11 @@ from .._reconstruct._reconstruct import regression_targets
 from .._reconstruct._slow import restore_slow
 from .._recordings._integrate import remove_drift
 
-#: one colour per recording (well), reused in every panel
+#: one colour, line style and marker per recording (well), reused in every panel: lines that coincide or print in
+#: grey stay apart
 COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
+STYLES = ("-", "--", ":", "-.")
+MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*")
 
 
 def _linear_band(model, columns: slice, basis, level: float):
@@ -68,7 +71,7 @@ def _dress(ax, xlabel: str, ylabel: str, title: str) -> None:
 
 
 def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "x", force_unit: str = "force",
-               band="auto") -> Figure:
+               band="auto", unit: str | None = None) -> Figure:
     """The fitted model against its training recordings, one row per DOF (cell):
 
     - restoring force F_r(x) over the data's span and a quarter of it beyond, with the
@@ -83,8 +86,16 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
     `recordings`: the `Recording`s the model was fitted on (v and a are estimated where
     missing, as `reconstruct` does). `band`: "auto" (default) draws the model's 95 % bands of
     F_r and F_d (`force_band`) when it carries a covariance (`reconstruct` sets one); None draws none;
-    or a callable `x (n, dof) -> (lower, upper)`, each (n, dof), for F_r (then no band on F_d). Saved (PNG, or PDF by suffix) to
-    `path` when given; returns the matplotlib `Figure`."""
+    or a callable `x (n, dof) -> (lower, upper)`, each (n, dof), for F_r (then no band on F_d). The band's
+    half-width is also drawn on its own axis (right), where it is too narrow to see beside the force. `unit`: the
+    recordings' length unit ("mm"), written on every axis (default: the recordings' own, where their files named
+    one). Saved (PNG, or PDF by suffix) to `path` when given; returns the matplotlib `Figure`."""
+    if unit is None:
+        unit = next((r.length_unit for r in recordings if getattr(r, "length_unit", None)), None)
+    lu = f" [{unit}]" if unit else ""
+    if unit and force_unit == "force":  # the model's forces are mass x length / s^2 in the recordings' units
+        force_unit = f"mass x {unit}/s²"
+    vu = f" [{unit}/s]" if unit else f" ({x_unit}/s)"
     masses = np.asarray(model.masses, float)
     # an x integrated from v or a: the slow shift its drift removal took, restored as `reconstruct` restores it
     recs = [r.complete(model.topology) for r in recordings]
@@ -96,7 +107,7 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
     d = model.n_dof
     height = 3.0 * d + 0.7
     fig = Figure(figsize=(13.5, height))  # fixed margins: a constrained layout doubles the time to save
-    fig.subplots_adjust(left=0.06, right=0.99, wspace=0.3, hspace=0.55, top=1 - 0.62 / height,
+    fig.subplots_adjust(left=0.06, right=0.99, wspace=0.55, hspace=0.55, top=1 - 0.62 / height,
                         bottom=0.5 / height)
     axes = np.atleast_2d(fig.subplots(d, 3, squeeze=False))
     for i in range(d):
@@ -113,6 +124,12 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
             blo, bhi = (np.asarray(b)[:, i] for b in band(X))
             half = 0.5 * float(np.max(bhi - blo))
             ax_r.fill_between(xs, blo, bhi, color="0.6", alpha=0.4, lw=0, label=f"95 % band (half-width <= {half:.2g})")
+            tw = ax_r.twinx()  # the band beside a force 100-1000 times its width is a line: its half-width on its own
+            tw.plot(xs, 0.5 * (bhi - blo), color="tab:red", ls="--", lw=1.0)
+            tw.set_ylim(0.0, 1.15 * max(half, 1e-300))
+            tw.set_ylabel("95 % band half-width", color="tab:red", fontsize=7)
+            tw.tick_params(axis="y", labelcolor="tab:red", labelsize=7)
+            ax_r.plot([], [], color="tab:red", ls="--", lw=1.0, label="band half-width (right axis)")
         for k, r in enumerate(recs):
             col = COLOURS[k % len(COLOURS)]
             ax_r.axvspan(float(np.min(r.x[:, i])), float(np.max(r.x[:, i])), color=col, alpha=0.25, lw=0,
@@ -122,7 +139,7 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
             xz = xs[z] - fr[z] * (xs[z + 1] - xs[z]) / (fr[z + 1] - fr[z])
             stable = fr[z + 1] > fr[z]
             ax_r.plot([xz], [0.0], "o", ms=6, mfc="k" if stable else "w", mec="k")
-        _dress(ax_r, f"{x_unit} (DOF {i})", f"restoring force ({force_unit})",
+        _dress(ax_r, f"{x_unit} (DOF {i}){lu}", f"restoring force ({force_unit})",
                "restoring force (filled o: stable, open: saddle)")
 
         for k, r in enumerate(recs):
@@ -133,12 +150,13 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
             V = np.zeros_like(Xv)
             V[:, i] = vs
             fd = forces(model, Xv, V, parts=True)[1][:, i]
-            ax_d.plot(vs, fd, "-", color=col, lw=1.5, label=f"{r.name} (x = {np.mean(r.x[:, i]):.3g})")
+            ax_d.plot(vs, fd, STYLES[k % len(STYLES)], color=col, lw=1.5, marker=MARKERS[k % len(MARKERS)],
+                      markevery=(k * 7, 40), ms=4, label=f"{r.name} (x = {np.mean(r.x[:, i]):.3g}{lu})")
             if damping_band is not None:
                 dlo, dhi = (np.asarray(b)[:, i] for b in damping_band(Xv, V))
                 ax_d.fill_between(vs, dlo, dhi, color=col, alpha=0.35, lw=0)
             ax_d.axvspan(float(np.min(r.v[:, i])), float(np.max(r.v[:, i])), color=col, alpha=0.15, lw=0)
-        _dress(ax_d, f"velocity ({x_unit}/s)", f"damping force ({force_unit})",
+        _dress(ax_d, f"velocity{vu}", f"damping force ({force_unit})",
                "damping force at each well (light: recorded speeds" + ("; 95 % band)" if damping_band is not None
                                                                         else ")"))
 
@@ -159,7 +177,8 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
             nb = min(400, r.t.size)
             edges = np.linspace(0, r.t.size, nb + 1).astype(int)
             lo_, hi_ = np.minimum.reduceat(res, edges[:-1]), np.maximum.reduceat(res, edges[:-1])
-            ax_e.fill_between(r.t[edges[:-1]], lo_, hi_, color=col, alpha=0.5, lw=0, step="post",
+            ax_e.fill_between(r.t[edges[:-1]], lo_, hi_, facecolor=col, alpha=0.5, lw=0, step="post",
+                              hatch=(None, "////", "\\\\", "xx")[k % 4], edgecolor="w",
                               label=f"{r.name}: NRMSE {nrmse:.3g}" + (f" (above {cut:.2g} Hz, as fitted)"
                                                                          if cut is not None else ""))
         _dress(ax_e, "time (s)", f"measured - model ({force_unit})",

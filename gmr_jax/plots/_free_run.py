@@ -16,7 +16,8 @@ def free_run_figure(run, path=None, *, x_unit: str = "recording units", title: s
     for i in range(d):
         ax, ar = axes[2 * i], axes[2 * i + 1]
         ax.plot(run.t, run.x_measured[:, i], color="0.25", lw=1.0, label="measured")
-        ax.plot(run.t, run.x[:, i], color="tab:red", lw=0.9, ls="--", label="model (free run)")
+        ax.plot(run.t, run.x[:, i], color="tab:red", lw=0.9, ls="--", marker="o", ms=3,
+                markevery=max(run.t.size // 40, 1), label="model (free run)")
         ax.set_ylabel(f"$x_{{{i}}}$ ({x_unit})")
         ax.legend(loc="upper right", fontsize=8, ncols=2)
         extra = ""
@@ -27,7 +28,7 @@ def free_run_figure(run, path=None, *, x_unit: str = "recording units", title: s
                 extra += f"; well crossings {int(run.crossings[0, i])} measured, {model} free run"
         ax.set_title(f"DOF {i}: free-run NRMSE {100 * run.nrmse[i]:.3g} %{extra}", fontsize=10, loc="left")
         ax.grid(alpha=0.3)
-        ar.plot(run.t, run.residual[:, i], color="tab:blue", lw=0.8)
+        ar.plot(run.t, run.residual[:, i], color="tab:blue", lw=0.8, label="model - data")
         ar.axhline(0.0, color="0.5", lw=0.6)
         ar.set_ylabel(f"model - data\n({x_unit})")
         ar.grid(alpha=0.3)
