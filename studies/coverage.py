@@ -201,7 +201,11 @@ def main():
     p.add_argument("--out", default=None)
     p.add_argument("--no-velocity-eiv", action="store_true",
                    help="reconstruct(velocity_eiv=False): a measured v taken as exact (the default before stop 46)")
+    p.add_argument("--coordination", default=None,
+                   help="reconstruct(coordination=...): e.g. 'evidence', the one-posterior estimator")
     args = p.parse_args()
+    if args.coordination:
+        OPTIONS["coordination"] = args.coordination
     if args.no_velocity_eiv:
         OPTIONS["velocity_eiv"] = False
     cases = [CASES[k] for k in QUICK] if args.quick else CASES

@@ -468,7 +468,7 @@ def test_cli_basins_notes_the_amplitudes_that_push_beyond_the_fitted_range(tmp_p
     doc = json.loads(path.read_text())
     doc["data_range"] = [[-1.1, 1.1]]
     path.write_text(json.dumps(doc))
-    said = _beyond_data(duffing, path, np.array([0.1, 0.5, 1.0]), "tip")
+    said = _beyond_data(duffing, path, np.array([0.1, 0.5, 1.0]), "tip")[0]
     a_star = 2 / (3 * np.sqrt(3))
     root = max(r.real for r in np.roots([1, 0, -1, -1]) if abs(r.imag) < 1e-12)
     assert f"A > {a_star:.4g} (2 of 3 amplitudes)" in said and f"x = {root:.4g}" in said
@@ -482,7 +482,7 @@ def test_cli_basins_notes_the_amplitudes_that_push_beyond_the_fitted_range(tmp_p
     doc = json.loads(path.read_text())
     doc["data_range"] = [[-1.1, 1.1], [-1.1, 1.1]]
     path.write_text(json.dumps(doc))
-    base = _beyond_data(chain, path, np.array([0.3, 0.5]), "base")  # cell 0 carries 1.5: A* = 0.385 / 1.5
+    base = _beyond_data(chain, path, np.array([0.3, 0.5]), "base")[0]  # cell 0 carries 1.5: A* = 0.385 / 1.5
     assert f"A > {a_star / 1.5:.4g} (2 of 2 amplitudes)" in base and "cell 0" in base
 
 

@@ -30,12 +30,13 @@ def register(sub):
     f.add_argument("--method", choices=["gmr", "gmc-sindy"], default="gmr",
                    help="gmr: local fits at each well, then one global law; gmc-sindy: the baseline, one library on "
                    "all data")
-    f.add_argument("--coordination", choices=["auto", "gls", "hermite", "joint"], default="auto",
+    f.add_argument("--coordination", choices=["auto", "gls", "hermite", "joint", "evidence"], default="auto",
                    help="GMR's global step: auto (default: the paper's covariance-weighted route unless it fails "
                    "its own data or its damping feeds energy in, then the joint regression; its damping also where the "
                    "noise of a measured v moves it), gls, hermite (the "
                    "paper's exact interpolant), joint (one penalised regression on all wells' data, admissible "
-                   "models only)")
+                   "models only), evidence (one posterior of all wells' records: the law, its degree and its band "
+                   "from the evidence, standard errors and band from one covariance)")
     f.add_argument("--no-shared-design", action="store_true",
                    help="chains: each cell alone (by default, cells of one design lend the restoring orders their "
                    "local fits resolve to the weakly excited cells, as a prior on those cells' own fits; the model "

@@ -189,10 +189,15 @@ def _initial(stats, decay: float) -> Hyper:
     return Hyper(jnp.zeros(3), jnp.full(3, jnp.log(decay / (1.0 - decay))), jnp.log(1e-2 * var + 1e-30))
 
 
+#: below this (in units of the target's RMS) a column's posterior mean and standard deviation are zero
+OFF = 1e-9
+
+
 class Posterior(eqx.Module):
-    """The posterior of one DOF's scaled coefficients: `mean` (P,) and `covariance` (P, P),
-    averaged over the restoring degrees with their evidence weights; per degree K = 1..`degree`
-    the hyperparameters, the log evidence and the weight."""
+    """The posterior of one DOF's scaled coefficients: `mean` (P,), that of the most probable
+    restoring degree, and `covariance` (P, P), the second moment about it of the mixture over the
+    degrees K = 1..`degree` (the band holds the degree's uncertainty); per degree the
+    hyperparameters, the log evidence and the weight p(K | rows)."""
 
     mean: Float[Array, " p"]
     covariance: Float[Array, "p p"]
@@ -224,9 +229,9 @@ def _optimise(stats, basis: Basis, active, max_steps: int):
 
 
 def posterior(stats, basis: Basis, *, max_steps: int = 1024, throw: bool = True) -> Solution:
-    """Posterior of the scaled coefficients from per-well statistics, averaged over the restoring
-    degree K = 1..`basis.degree` with weights p(K | rows) (uniform prior over K; each K with its
-    own evidence-optimal hyperparameters).
+    """Posterior of the scaled coefficients from per-well statistics: each restoring degree
+    K = 1..`basis.degree` with its own evidence-optimal hyperparameters, weighted by p(K | rows)
+    (a uniform prior over K); the mean of the most probable K, the mixture's covariance about it.
 
     **Arguments:**
 
@@ -243,10 +248,14 @@ def posterior(stats, basis: Basis, *, max_steps: int = 1024, throw: bool = True)
     active = jnp.asarray(np.stack([np.where(fam == 0, order <= k, True) for k in degrees]).astype(float))
     h, means, covs, log_ev, codes = jax.vmap(lambda a: _optimise(stats, basis, a, max_steps))(active)
     weight = jax.nn.softmax(jnp.where(jnp.isfinite(log_ev), log_ev, -jnp.inf))
-    mean = jnp.einsum("k,ki->i", weight, means)
+    best = jnp.argmax(weight)
+    mean = means[best]
     dev = means - mean[None, :]
     cov = jnp.einsum("k,kij->ij", weight, covs) + jnp.einsum("k,ki,kj->ij", weight, dev, dev)
-    best = jnp.argmax(weight)
+    # a column the evidence switched off (its prior scale collapsed) is exactly absent
+    absent = (jnp.diagonal(cov) < OFF**2) & (jnp.abs(mean) < OFF)
+    mean = jnp.where(absent, 0.0, mean)
+    cov = jnp.where(absent[:, None] | absent[None, :], 0.0, cov)
     code = RESULTS.where(jnp.all(jnp.isfinite(mean)), as_result(codes[best]), RESULTS.nonfinite)
     out = Solution(Posterior(mean, cov, h, log_ev, weight), code, {})
     if throw:
