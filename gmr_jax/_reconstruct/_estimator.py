@@ -28,8 +28,8 @@ class ReconstructSettings(eqx.Module):
 
     **Arguments:**
 
-    - `degree`: highest Chebyshev order K of the restoring law (the prior's decay, chosen by
-      evidence, decides how much of it the data use).
+    - `degree`: highest Chebyshev order of the restoring law; every degree K = 1..`degree` is
+      fitted and weighted by its evidence p(K | rows).
     - `damping_order`: highest power d of both damping families.
     - `well_tol`: recordings whose mean deformation differs by less than this fraction of the
       DOF's spread of means are one well.
@@ -171,6 +171,10 @@ def model_from(masses, topology, blocks, covs) -> GlobalModel:
                        covariance=jnp.asarray(cov))
 
 
+def equilibria(recs, i: int, groups) -> np.ndarray:
+    """Each well's equilibrium of DOF `i`: the mean x of its recordings."""
+    return np.array([np.mean([recs[k].x[:, i].mean() for k in g]) for g in groups])
+
 
 def diagnose(recs, wells, model: GlobalModel, training: dict) -> list[str]:
     """Stage 6: warnings that read the data and the final model (they change nothing)."""
@@ -178,7 +182,7 @@ def diagnose(recs, wells, model: GlobalModel, training: dict) -> list[str]:
     names = [r.name for r in recs]
     for i, (_, labels, groups) in enumerate(wells):
         xcol = [r.x[:, i] for r in recs]
-        eq = np.array([np.mean([xcol[k].mean() for k in g]) for g in groups])
+        eq = equilibria(recs, i, groups)
         stiff = np.asarray(model.stiffness[i])
         slope = np.polynomial.polynomial.polyval(eq, np.polynomial.polynomial.polyder(stiff))
         swing, swung = _sanity.check_swings(i, names, xcol, labels, eq, slope)

@@ -1271,7 +1271,7 @@ def reconstruct(
 
 def _evidence(recordings, settings, library, masses, topology, well_tol, throw, progress) -> Solution:
     """`reconstruct` on one probabilistic model of the data (`_estimator`)."""
-    from ._estimator import ReconstructSettings, diagnose, estimate, model_from
+    from ._estimator import ReconstructSettings, diagnose, equilibria, estimate, model_from
 
     if settings is None:
         settings = ReconstructSettings(damping_order=library.damping_order, well_tol=well_tol)
@@ -1288,7 +1288,7 @@ def _evidence(recordings, settings, library, masses, topology, well_tol, throw, 
     warnings += diagnose(recs, wells, model, training)
     reports = []
     for i, (_, labels, groups) in enumerate(wells):
-        eq = np.array([np.mean([recs[k].x[:, i].mean() for k in g]) for g in groups])
+        eq = equilibria(recs, i, groups)
         st = dof_stats[i] | {"K_r": int(dof_stats[i]["degree"]), "K_d": int(settings.damping_order),
                              "escapes": _sanity.escapes(np.asarray(model.stiffness[i]), eq)}
         reports.append(DofReport(equilibria=eq, local_coef=np.zeros((len(groups), 0)),
