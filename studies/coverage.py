@@ -148,8 +148,9 @@ def run_case(label, factory, amplitude, snr, seed):
     seconds = time.time() - t0
     rows = []
     for i in range(sol.value.n_dof):
-        row = {"case": label, "snr": snr, "seed": seed, "dof": i, "route": sol.stats["dofs"][i].stats["coordination"],
-               "seconds": seconds}
+        st = sol.stats["dofs"][i].stats
+        route = st["coordination"] + (f" + design (spread {st['design_spread']:.1e})" if "design" in st else "")
+        row = {"case": label, "snr": snr, "seed": seed, "dof": i, "route": route, "seconds": seconds}
         row |= measure(sol.value, system, i)
         rows.append(row)
     return rows, system, sol.value

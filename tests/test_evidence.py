@@ -108,3 +108,36 @@ def test_reconstruct_arrays_jit_vmap_and_gradients(joint):
     coefs = jax.vmap(lambda pp: gmr.reconstruct_arrays(x, v, pp, s, mask, well, n_wells=2, width=31, dt=dt,
                                                        settings=SETTINGS, throw=False)[0])(batch)
     np.testing.assert_allclose(np.asarray(coefs[1]), 2.0 * np.asarray(coefs[0]), rtol=1e-4, atol=1e-6)
+
+
+def _cubic_chain(saddles, stiffness=(20.0, 40.0), wells=(0.03, 0.025), masses=(0.04, 0.04)):
+    """A chain of bistable cubic cells F_i = c_i x (x - s_i)(x - L_i), trained around 0-0 and 1-1."""
+    terms = []
+    for i, (k, L, s, m) in enumerate(zip(stiffness, wells, saddles, masses)):
+        c = k / (s * L)
+        terms += [{"dof": i, "physics": "stiffness", "order": 1, "coefficient": c * s * L},
+                  {"dof": i, "physics": "stiffness", "order": 2, "coefficient": -c * (s + L)},
+                  {"dof": i, "physics": "stiffness", "order": 3, "coefficient": c},
+                  {"dof": i, "physics": "velocity_damping", "order": 1, "coefficient": 0.04 * np.sqrt(k * m)}]
+    L = np.asarray(wells)
+    return gmr.systems.System(
+        name="cubic2", truth=gmr.from_terms(list(masses), terms, "chain"), equilibria=np.stack([np.zeros(2), L]),
+        sweep=(0.5, 10.0), duration=8.0, fs=1000.0, x_range=np.stack([-0.1 * L, 1.1 * L], axis=1),
+        v_range=np.tile([[-0.1, 0.1]], (2, 1)), orders={"gmr": (5, 1), "gmc": (5, 1)}, description="2-cell cubic chain",
+        units=("x [m]", "x' [m/s]", "F [N]"))
+
+
+@pytest.mark.parametrize("saddles, one_design", [((0.012, 0.01), True), ((0.006, 0.0125), False)])
+def test_cells_share_a_law_only_where_they_are_one_design(saddles, one_design):
+    # same saddle ratio s/L: one design, scaled; otherwise each cell keeps its own law
+    chain = _cubic_chain(saddles)
+    recs = gmr.systems.make_recordings(chain, 3e-4, snr_db=40.0, seed=0)
+    sol = _fit(recs, settings=gmr.ReconstructSettings(damping_order=1))
+    for i in range(2):
+        st = sol.stats["dofs"][i].stats
+        assert st["design"] == [0, 1]
+        assert (st["design_spread"] < 0.1) == one_design
+        eq = chain.equilibria[:, i]
+        band = gmr.metrics.band_coverage(sol.value, chain.truth, i, (eq.min(), eq.max()), n=101, level=0.95)
+        assert band.share >= 0.9
+        assert gmr.metrics.restoring_error(sol.value, chain.truth, i, chain.x_range[i]) < 0.01

@@ -12,12 +12,16 @@ inertia m x'' enters as m phi'' x, the position damping u^j w = d/dt [h u^(j+1) 
 as -phi' times that, so neither needs a differentiated signal; rows from disjoint windows
 carry independent noise. Each well w has its own noise variance s_w^2.
 
-Prior: a_k ~ N(0, s_F^2 rho_F^(2k)) (the Chebyshev coefficients of a function analytic on a
-Bernstein ellipse fall geometrically), b_j ~ N(0, s_B^2 rho_B^(2|j-1|)) (viscous first),
+Prior: a_k ~ N(0, s_F^2 rho_F^(2 max(k - q, 0))) with q = 2W - 1 for W wells: a law with W
+stable wells has at least 2W - 1 zeros, so the orders up to q are all expected, and beyond them
+the Chebyshev coefficients of a function analytic on a Bernstein ellipse fall geometrically;
+b_j ~ N(0, s_B^2 rho_B^(2|j-1|)) (viscous first),
 c_j ~ N(0, s_C^2 rho_C^(2(j-1))). The six scales and decays and the wells' noise variances
 maximise the log marginal likelihood (MacKay's evidence); the posterior mean and covariance
 then give the law, its standard errors and its band, one covariance for all three.
 """
+
+import math
 
 import equinox as eqx
 import jax
@@ -62,10 +66,12 @@ def test_functions(width: int) -> np.ndarray:
 
 
 class Basis(eqx.Module):
-    """Sizes of the three families: restoring T_0..T_K, velocity sgn(w)|w|^0..d, position u^1..d w."""
+    """Sizes of the three families: restoring T_0..T_K, velocity sgn(w)|w|^0..d, position u^1..d w;
+    `free`: the restoring orders 0..`free` whose prior does not decay."""
 
     degree: int = eqx.field(static=True)
     damping_order: int = eqx.field(static=True)
+    free: int = eqx.field(static=True, default=0)
 
     @property
     def sizes(self) -> tuple[int, int, int]:
@@ -82,7 +88,8 @@ class Basis(eqx.Module):
     def decay_power(self) -> np.ndarray:
         """The exponent of rho in every column's prior variance."""
         k, d = self.degree, self.damping_order
-        return np.concatenate([np.arange(k + 1), np.abs(np.arange(d + 1) - 1), np.arange(d)]).astype(float)
+        restoring = np.maximum(np.arange(k + 1) - self.free, 0)
+        return np.concatenate([restoring, np.abs(np.arange(d + 1) - 1), np.arange(d)]).astype(float)
 
 
 def _chebyshev(u, degree: int):
@@ -160,20 +167,26 @@ def prior_sd(h: Hyper, basis: Basis):
     return jnp.exp(h.log_scale[fam] + power * jax.nn.log_sigmoid(h.logit_decay)[fam])
 
 
+def _gaussian(sq, Gs, bs, fit0, logdet_noise, n):
+    """Posterior and log evidence of z ~ N(0, diag(sq^2)) under rows with precision-weighted
+    Gram Gs = Phi' B Phi, moment bs = Phi' B y, y' B y = fit0, sum log det B = logdet_noise and n
+    rows; in whitened form A = I + D G D (D = diag(sq)), mean = D A^-1 D b."""
+    A = jnp.eye(sq.shape[0]) + sq[:, None] * Gs * sq[None, :]
+    chol = jnp.linalg.cholesky(A)
+    z = jax.scipy.linalg.cho_solve((chol, True), sq * bs)
+    logdet = 2.0 * jnp.sum(jnp.log(jnp.diag(chol)))
+    fit = fit0 - jnp.dot(sq * bs, z)
+    log_ev = 0.5 * (logdet_noise - fit - logdet - n * jnp.log(2.0 * jnp.pi))
+    return sq * z, chol, log_ev
+
+
 def _solve(h: Hyper, stats, basis: Basis, active):
     G, b, yy, n = stats
     beta = jnp.exp(-h.log_noise)
     sq = prior_sd(h, basis) * active  # inactive columns: zero prior variance
     Gs = jnp.einsum("w,wij->ij", beta, G)
     bs = jnp.einsum("w,wi->i", beta, b)
-    # whitened: A' = I + L^1/2 G L^1/2, mean = L^1/2 A'^-1 L^1/2 b
-    A = jnp.eye(sq.shape[0]) + sq[:, None] * Gs * sq[None, :]
-    chol = jnp.linalg.cholesky(A)
-    z = jax.scipy.linalg.cho_solve((chol, True), sq * bs)
-    mean = sq * z
-    logdet = 2.0 * jnp.sum(jnp.log(jnp.diag(chol)))
-    fit = jnp.sum(beta * yy) - jnp.dot(sq * bs, z)
-    log_ev = 0.5 * (jnp.sum(n * jnp.log(beta)) - fit - logdet - jnp.sum(n) * jnp.log(2.0 * jnp.pi))
+    mean, chol, log_ev = _gaussian(sq, Gs, bs, jnp.sum(beta * yy), jnp.sum(n * jnp.log(beta)), jnp.sum(n))
     return mean, chol, sq, log_ev
 
 
@@ -181,6 +194,22 @@ def log_evidence(h: Hyper, stats, basis: Basis, active):
     """log p(rows | hyperparameters, active columns), the marginal likelihood of the
     linear-Gaussian model."""
     return _solve(h, stats, basis, active)[3]
+
+
+#: standard deviations of the hyperprior on the log scales and the logit decays: wide, so that the
+#: evidence decides, and proper, so that a family or an order the data do not need has a finite
+#: optimum instead of a scale that drifts to zero
+HYPER_SD = (10.0, 15.0)
+
+
+#: BFGS tolerance on the hyperparameters and on the evidence per row
+TOL = 1e-6
+
+
+def log_hyperprior(h: Hyper):
+    """log p(hyperparameters) up to a constant: independent normals on the log scales and the
+    logit decays (`HYPER_SD`), flat on the log noise variances."""
+    return -0.5 * (jnp.sum((h.log_scale / HYPER_SD[0]) ** 2) + jnp.sum((h.logit_decay / HYPER_SD[1]) ** 2))
 
 
 def _initial(stats, decay: float) -> Hyper:
@@ -194,10 +223,10 @@ OFF = 1e-9
 
 
 class Posterior(eqx.Module):
-    """The posterior of one DOF's scaled coefficients: `mean` (P,), that of the most probable
-    restoring degree, and `covariance` (P, P), the second moment about it of the mixture over the
-    degrees K = 1..`degree` (the band holds the degree's uncertainty); per degree the
-    hyperparameters, the log evidence and the weight p(K | rows)."""
+    """The posterior of one DOF's scaled coefficients, a mixture over the restoring degree
+    K = 1..`degree`: `mean` (P,) and `covariance` (P, P) of the mixture; per degree the
+    hyperparameters that maximise the evidence times the hyperprior, that maximum (log) and the
+    weight p(K | rows)."""
 
     mean: Float[Array, " p"]
     covariance: Float[Array, "p p"]
@@ -211,27 +240,39 @@ class Posterior(eqx.Module):
 _ADJOINT = optx.ImplicitAdjoint(linear_solver=lx.AutoLinearSolver(well_posed=False))
 
 
+def _minimise(loss, starts, args, max_steps: int):
+    """The better of BFGS runs from `starts`, and a `RESULTS` code: successful where BFGS stopped
+    by its tolerances or where the gradient there is below `TOL` (BFGS can wander along a
+    direction the loss does not depend on without meeting its step tolerance)."""
+    solver = optx.BFGS(rtol=TOL, atol=TOL)
+    sols = [optx.minimise(loss, solver, y0, args=args, max_steps=max_steps, throw=False, adjoint=_ADJOINT)
+            for y0 in starts]
+    vals = jnp.stack([loss(sl.value, args) for sl in sols])
+    best = jnp.argmin(vals)
+    y = jax.tree_util.tree_map(lambda *a: jnp.stack(a)[best], *[sl.value for sl in sols])
+    code = RESULTS.promote(sols[0].result)
+    for k, sl in enumerate(sols[1:], start=1):
+        code = RESULTS.where(best == k, RESULTS.promote(sl.result), code)
+    grad = jax.grad(loss)(jax.lax.stop_gradient(y), jax.lax.stop_gradient(args))
+    flat = jnp.max(jnp.abs(jnp.concatenate([jnp.ravel(g) for g in jax.tree_util.tree_leaves(grad)]))) < TOL
+    return y, RESULTS.where(flat, RESULTS.successful, code)
+
+
 def _optimise(stats, basis: Basis, active, max_steps: int):
     def loss(h, args):
-        return -log_evidence(h, args, basis, active) / jnp.maximum(jnp.sum(args[3]), 1.0)
+        return -(log_evidence(h, args, basis, active) + log_hyperprior(h)) / jnp.maximum(jnp.sum(args[3]), 1.0)
 
-    solver = optx.BFGS(rtol=1e-7, atol=1e-7)
-    sols = [optx.minimise(loss, solver, _initial(stats, decay), args=stats, max_steps=max_steps, throw=False,
-                          adjoint=_ADJOINT)
-            for decay in (0.3, 0.7)]  # two starts: the evidence can have a local optimum at either end
-    vals = [loss(sl.value, stats) for sl in sols]
-    better = vals[1] < vals[0]
-    h = jax.tree_util.tree_map(lambda a, b_: jnp.where(better, a, b_), sols[1].value, sols[0].value)
-    code = RESULTS.where(better, RESULTS.promote(sols[1].result), RESULTS.promote(sols[0].result))
+    # two starts: the evidence can have a local optimum at either end
+    h, code = _minimise(loss, [_initial(stats, decay) for decay in (0.3, 0.7)], stats, max_steps)
     mean, chol, sq, log_ev = _solve(h, stats, basis, active)
     inv = jax.scipy.linalg.cho_solve((chol, True), jnp.eye(sq.shape[0]))
-    return h, mean, sq[:, None] * inv * sq[None, :], log_ev, code._value
+    return h, mean, sq[:, None] * inv * sq[None, :], log_ev + log_hyperprior(h), code._value
 
 
 def posterior(stats, basis: Basis, *, max_steps: int = 1024, throw: bool = True) -> Solution:
     """Posterior of the scaled coefficients from per-well statistics: each restoring degree
-    K = 1..`basis.degree` with its own evidence-optimal hyperparameters, weighted by p(K | rows)
-    (a uniform prior over K); the mean of the most probable K, the mixture's covariance about it.
+    K = 1..`basis.degree` with its own evidence-optimal hyperparameters, weighted by
+    p(K | rows) (a uniform prior over K); mean and covariance are the mixture's.
 
     **Arguments:**
 
@@ -239,25 +280,124 @@ def posterior(stats, basis: Basis, *, max_steps: int = 1024, throw: bool = True)
     - `basis`: the families' sizes.
     - `max_steps`: BFGS steps on the negative log evidence.
 
-    **Returns:** a `Solution` with a `Posterior` value and a `RESULTS` code (the optimiser's).
-    Jittable, vmappable over datasets, differentiable (each optimum by the implicit function
-    theorem)."""
+    **Returns:** a `Solution` with a `Posterior` value and a `RESULTS` code (the optimiser's at
+    the most probable degree). Jittable, vmappable over datasets, differentiable (each optimum
+    by the implicit function theorem)."""
     fam = basis.family()
     order = np.concatenate([np.arange(n) for n in basis.sizes])
     degrees = np.arange(1, basis.degree + 1)
     active = jnp.asarray(np.stack([np.where(fam == 0, order <= k, True) for k in degrees]).astype(float))
     h, means, covs, log_ev, codes = jax.vmap(lambda a: _optimise(stats, basis, a, max_steps))(active)
     weight = jax.nn.softmax(jnp.where(jnp.isfinite(log_ev), log_ev, -jnp.inf))
-    best = jnp.argmax(weight)
-    mean = means[best]
+    mean = jnp.einsum("k,ki->i", weight, means)
     dev = means - mean[None, :]
     cov = jnp.einsum("k,kij->ij", weight, covs) + jnp.einsum("k,ki,kj->ij", weight, dev, dev)
     # a column the evidence switched off (its prior scale collapsed) is exactly absent
     absent = (jnp.diagonal(cov) < OFF**2) & (jnp.abs(mean) < OFF)
     mean = jnp.where(absent, 0.0, mean)
     cov = jnp.where(absent[:, None] | absent[None, :], 0.0, cov)
+    best = jnp.argmax(weight)
     code = RESULTS.where(jnp.all(jnp.isfinite(mean)), as_result(codes[best]), RESULTS.nonfinite)
     out = Solution(Posterior(mean, cov, h, log_ev, weight), code, {})
+    if throw:
+        out = eqx.tree_at(lambda s: s.value, out, out.result.error_if(out.value, out.result != RESULTS.successful))
+    return out
+
+
+def chebyshev_shift(a, b, degree: int):
+    """Matrix S (K + 1, K + 1) with sum_i c_i T_i(a u + b) = sum_m (S c)_m T_m(u): Chebyshev
+    coefficients in u of a law given by Chebyshev coefficients in u' = a u + b."""
+    k = degree + 1
+    to_power = np.zeros((k, k))  # [m, i]: coefficient of u^m in T_i(u)
+    for i in range(k):
+        c = np.polynomial.chebyshev.cheb2poly(np.eye(k)[i])
+        to_power[: c.shape[0], i] = c
+    to_cheb = np.linalg.inv(to_power)
+    i = np.arange(k)
+    binom = np.array([[float(math.comb(int(c), int(m))) if m <= c else 0.0 for c in i] for m in i])
+    expo = i[None, :] - i[:, None]
+    # [m, c]: coefficient of u^m in (a u + b)^c
+    sub = binom * a ** i[:, None].astype(float) * jnp.where(expo >= 0, b ** jnp.maximum(expo, 0), 0.0)
+    return jnp.asarray(to_cheb) @ sub @ jnp.asarray(to_power)
+
+
+class Design(eqx.Module):
+    """Hyperparameters of one design's shared law: log scale and logit decay of its Chebyshev
+    coefficients, and each member's log spread about it."""
+
+    log_scale: Float[Array, ""]
+    logit_decay: Float[Array, ""]
+    log_spread: Float[Array, " members"]
+
+
+def _design_matrices(maps, damping: int):
+    """E (J, P, Z): member j's scaled coefficients theta_j = E_j z from z = [g, d_1, e_1, ...,
+    d_J, e_J] (g the shared law, d_j member j's deviation, e_j its damping coefficients)."""
+    j, k = maps.shape[0], maps.shape[1]
+    per = k + damping
+    E = jnp.zeros((j, k + damping, k + j * per))
+    for m in range(j):
+        E = E.at[m, :k, :k].set(maps[m])
+        E = E.at[m, :k, k + m * per: k + m * per + k].set(maps[m])
+        E = E.at[m, k:, k + m * per + k: k + (m + 1) * per].set(jnp.eye(damping))
+    return E
+
+
+def _design_solve(d: Design, stats, maps, damping_sd, log_noise, basis: Basis):
+    G, b, yy, n = stats  # (J, W, P, P), (J, W, P), (J, W), (J, W)
+    beta = jnp.exp(-log_noise)
+    E = _design_matrices(maps, damping_sd.shape[1])
+    Gs = jnp.einsum("jpz,jw,jwpq,jqy->zy", E, beta, G, E)
+    bs = jnp.einsum("jpz,jw,jwp->z", E, beta, b)
+    power = jnp.asarray(basis.decay_power()[: basis.degree + 1])
+    shape = jnp.exp(power * jax.nn.log_sigmoid(d.logit_decay))
+    member = jnp.concatenate([jnp.exp(d.log_spread)[:, None] * shape[None, :], damping_sd], axis=1)
+    sq = jnp.concatenate([jnp.exp(d.log_scale) * shape, member.reshape(-1)])
+    mean, chol, log_ev = _gaussian(sq, Gs, bs, jnp.sum(beta * yy), jnp.sum(n * jnp.log(beta)), jnp.sum(n))
+    return E, mean, chol, sq, log_ev
+
+
+def _log_design_prior(d: Design):
+    return -0.5 * (jnp.sum((jnp.append(d.log_spread, d.log_scale) / HYPER_SD[0]) ** 2)
+                   + (d.logit_decay / HYPER_SD[1]) ** 2)
+
+
+def design_posterior(stats, maps, damping_sd, log_noise, basis: Basis, *, max_steps: int = 1024,
+                     throw: bool = True) -> Solution:
+    """Posterior of J members of one design: each member's restoring law, in the design's
+    normalised coordinates, is the shared law g plus its own deviation d_j,
+
+        theta_j = [A_j (g + d_j); e_j],   g ~ N(0, s^2 rho^(2 p_k)),   d_j ~ N(0, t_j^2 rho^(2 p_k)),
+
+    (p_k the restoring decay powers of `basis`, e_j the damping coefficients with the prior
+    `damping_sd` and the noise `log_noise` of the member's own fit). The scale s, decay rho and
+    spreads t_j maximise the evidence of all members' rows times the hyperprior: a member whose
+    rows disagree with the others' law gets a large t_j and keeps its own law.
+
+    **Arguments:**
+
+    - `stats`: the members' `well_statistics`, stacked (J, W, ...).
+    - `maps`: (J, K + 1, K + 1) A_j, the design's normalised Chebyshev coefficients to member
+      j's scaled restoring coefficients.
+    - `damping_sd`: (J, P - K - 1) the damping columns' prior standard deviations.
+    - `log_noise`: (J, W) the wells' log noise variances.
+
+    **Returns:** a `Solution` whose value is `(mean (J, P), covariance (J, P, P), Design)`."""
+
+    def loss(d, args):
+        ev = _design_solve(d, args, maps, damping_sd, log_noise, basis)[4]
+        return -(ev + _log_design_prior(d)) / jnp.maximum(jnp.sum(args[3]), 1.0)
+
+    j = maps.shape[0]
+    starts = [Design(jnp.zeros(()), jnp.asarray(-1.0), jnp.full(j, t)) for t in (-6.0, 0.0)]
+    d, code = _minimise(loss, starts, stats, max_steps)  # two starts: the members one design, or each its own
+    E, mean, chol, sq, _ = _design_solve(d, stats, maps, damping_sd, log_noise, basis)
+    inv = jax.scipy.linalg.cho_solve((chol, True), jnp.eye(sq.shape[0]))
+    cz = sq[:, None] * inv * sq[None, :]
+    means = jnp.einsum("jpz,z->jp", E, mean)
+    covs = jnp.einsum("jpz,zy,jqy->jpq", E, cz, E)
+    code = RESULTS.where(jnp.all(jnp.isfinite(means)), code, RESULTS.nonfinite)
+    out = Solution((means, covs, d), code, {})
     if throw:
         out = eqx.tree_at(lambda s: s.value, out, out.result.error_if(out.value, out.result != RESULTS.successful))
     return out

@@ -103,7 +103,21 @@ def reconstruct_arrays(
     stiffness x^0..x^K, velocity damping sgn(v)|v|^0..d, position damping x^0..x^d v; their
     covariance (Q, Q); the scaled posterior's `Solution` (its `result` a `RESULTS` code).
     Jittable, vmappable over datasets, differentiable in both modes with respect to the data."""
-    basis = _bayes.Basis(settings.degree, settings.damping_order)
+    basis, geometry, stats = _prepare(x, v, p, s, mask, well, n_wells, width, dt, settings)
+    sol = _bayes.posterior(stats, basis, throw=throw)
+    M = _bayes.to_monomials(basis, *geometry)
+    post = sol.value
+    return M @ post.mean, M @ post.covariance @ M.T, sol
+
+
+def _basis(settings: ReconstructSettings, n_wells: int) -> _bayes.Basis:
+    return _bayes.Basis(settings.degree, settings.damping_order, min(2 * n_wells - 1, settings.degree))
+
+
+def _prepare(x, v, p, s, mask, well, n_wells, width, dt, settings):
+    """Stage 3: the basis, the geometry (centre, half-span, speed, target scale) and the wells'
+    statistics of the weak-form rows."""
+    basis = _basis(settings, n_wells)
     m = mask.astype(x.dtype)
     lo = jnp.min(jnp.where(mask, x, jnp.inf))
     hi = jnp.max(jnp.where(mask, x, -jnp.inf))
@@ -112,10 +126,26 @@ def reconstruct_arrays(
     rows, target, valid = _bayes.weak_rows(x, v, p, s, mask, centre, half, speed, basis, width, dt)
     scale = jnp.sqrt(jnp.sum(valid * target**2) / jnp.maximum(jnp.sum(valid), 1.0))
     stats = _bayes.well_statistics(rows, target / scale, valid, well, n_wells)
-    sol = _bayes.posterior(stats, basis, throw=throw)
-    M = _bayes.to_monomials(basis, centre, half, speed, scale)
-    post = sol.value
-    return M @ post.mean, M @ post.covariance @ M.T, sol
+    return basis, (centre, half, speed, scale), stats
+
+
+@eqx.filter_jit
+def _fit(x, v, p, s, mask, well, n_wells, settings, width, dt):
+    basis, geometry, stats = _prepare(x, v, p, s, mask, well, n_wells, width, dt, settings)
+    return geometry, stats, _bayes.posterior(stats, basis, throw=False)
+
+
+@eqx.filter_jit
+def _design(stats, geometry, wells, slope, hyper, basis):
+    """The members' posterior under one shared law: the design coordinate puts each member's
+    outer wells at -1 and 1, and its law is normalised by its slope there (F'(w_0) l)."""
+    centre, half, _, scale = geometry
+    mid, l = 0.5 * (wells[:, 0] + wells[:, 1]), 0.5 * (wells[:, 1] - wells[:, 0])
+    shift = jax.vmap(lambda a, b: _bayes.chebyshev_shift(a, b, basis.degree))(half / l, (centre - mid) / l)
+    maps = (slope * l / scale)[:, None, None] * shift
+    last = jax.tree_util.tree_map(lambda a: a[:, -1], hyper)  # each member's hyperparameters at the top degree
+    damping_sd = jax.vmap(lambda h: _bayes.prior_sd(h, basis))(last)[:, basis.degree + 1:]
+    return _bayes.design_posterior(stats, maps, damping_sd, last.log_noise, basis, throw=False)
 
 
 def estimate(recs, masses, topology, settings: ReconstructSettings, wells, say, failure):
@@ -123,21 +153,18 @@ def estimate(recs, masses, topology, settings: ReconstructSettings, wells, say, 
     covariances and per-DOF stats."""
     d = recs[0].n_dof
     k, dd = settings.degree, settings.damping_order
-    blocks, covs, stats = [], [], []
+    fits, stats = [], []
     for i in range(d):
         _, labels, groups = wells[i]
         say(f"{f'DOF {i} ({i + 1}/{d}): ' if d > 1 else ''}posterior of the global law")
         width = _width(recs, i, settings)
         x, v, p, s, mask = _dof_arrays(recs, i, masses, topology)
-        coef, cov, sol = _fit(jnp.asarray(x), jnp.asarray(v), jnp.asarray(p), jnp.asarray(s), jnp.asarray(mask),
-                              jnp.asarray(labels), len(groups), settings, width, recs[0].dt)
+        geometry, wstats, sol = _fit(jnp.asarray(x), jnp.asarray(v), jnp.asarray(p), jnp.asarray(s),
+                                     jnp.asarray(mask), jnp.asarray(labels), len(groups), settings, width, recs[0].dt)
         if sol.result != RESULTS.successful:
             failure.note(sol.result, f"DOF {i}: evidence maximisation")
-        coef, cov = np.asarray(coef), np.asarray(cov)
-        blocks.append((coef[: k + 1], coef[k + 1: k + dd + 2], coef[k + dd + 2:]))
-        covs.append(cov)
-        h = sol.value.hyper
-        post = sol.value
+        post, h = sol.value, sol.value.hyper
+        fits.append([geometry, wstats, post.mean, post.covariance, h])
         sd = np.sqrt(np.clip(np.diag(np.asarray(post.covariance)), 0, None))
         stats.append({
             "coordination": "evidence",
@@ -149,13 +176,40 @@ def estimate(recs, masses, topology, settings: ReconstructSettings, wells, say, 
             "noise_sd": np.exp(0.5 * np.asarray(h.log_noise)).tolist(),
             "resolution": (np.abs(np.asarray(post.mean)) / np.maximum(sd, 1e-300)).tolist(),
         })
+    maps = [np.asarray(_bayes.to_monomials(_basis(settings, len(wells[i][2])), *fits[i][0])) for i in range(d)]
+    for members in designs(recs, wells):
+        say(f"DOFs {', '.join(map(str, members))}: one design")
+        eq = np.stack([equilibria(recs, i, wells[i][2])[[0, -1]] for i in members])
+        slope = np.array([np.polynomial.polynomial.polyval(eq[j, 0], np.polynomial.polynomial.polyder(
+            (maps[i] @ np.asarray(fits[i][2]))[: k + 1])) for j, i in enumerate(members)])
+        stack = lambda *a: jnp.stack(a)  # noqa: E731
+        sol = _design(jax.tree_util.tree_map(stack, *[fits[i][1] for i in members]),
+                      jax.tree_util.tree_map(stack, *[fits[i][0] for i in members]), jnp.asarray(eq),
+                      jnp.asarray(slope), jax.tree_util.tree_map(stack, *[fits[i][4] for i in members]),
+                      _basis(settings, len(wells[members[0]][2])))
+        if sol.result != RESULTS.successful:
+            failure.note(sol.result, f"DOFs {members}: evidence maximisation of the shared law")
+        means, covs_, dh = sol.value
+        spread = np.exp(np.asarray(dh.log_spread) - np.asarray(dh.log_scale))
+        for j, i in enumerate(members):
+            fits[i][2], fits[i][3] = means[j], covs_[j]
+            stats[i] |= {"design": members, "design_spread": float(spread[j])}
+    blocks, covs = [], []
+    for i in range(d):
+        coef = maps[i] @ np.asarray(fits[i][2])
+        blocks.append((coef[: k + 1], coef[k + 1: k + dd + 2], coef[k + dd + 2:]))
+        covs.append(maps[i] @ np.asarray(fits[i][3]) @ maps[i].T)
     return blocks, covs, stats
 
 
-@eqx.filter_jit
-def _fit(x, v, p, s, mask, well, n_wells, settings, width, dt):
-    return reconstruct_arrays(x, v, p, s, mask, well, n_wells=n_wells, width=width, dt=dt, settings=settings,
-                              throw=False)
+def designs(recs, wells) -> list[list[int]]:
+    """The DOFs that may share one design: those with the same number (two or more) of wells,
+    in groups of two or more. How far each member follows the shared law is the evidence's."""
+    by = {}
+    for i, (_, _, groups) in enumerate(wells):
+        if len(groups) >= 2:
+            by.setdefault(len(groups), []).append(i)
+    return [m for m in by.values() if len(m) >= 2]
 
 
 def model_from(masses, topology, blocks, covs) -> GlobalModel:
