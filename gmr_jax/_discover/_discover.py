@@ -93,10 +93,6 @@ class DiscoveryReport:
         return summary(self)
 
 
-#: `sign_certain` runs (a module switch, for the studies' before/after and the tests' teeth)
-SIGN_CERTAIN = True
-
-
 def _pct(a):
     return f"{100 * a:.3g} %"
 
@@ -402,8 +398,8 @@ def discover(
         terms = base + cands
         rows = [dof_rows(r, model, i, terms, form=form, support=support, decimate=decimate,
                          mass_column=refit_masses) for r in recs]
-        if SIGN_CERTAIN:  # strong form: the samples where sgn(v) is uncertain left out (`_equation.sign_certain`)
-            rows = [sign_certain(rw, r, i) for rw, r in zip(rows, recs)]
+        # strong form: the samples where sgn(v) is uncertain left out (`_equation.sign_certain`)
+        rows = [sign_certain(rw, r, i) for rw, r in zip(rows, recs)]
         y = np.concatenate([r.y for r in rows])
         X = np.concatenate([r.columns for r in rows])
         Xb, Xc = X[:, : len(base)], X[:, len(base):]

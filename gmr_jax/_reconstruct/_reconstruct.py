@@ -36,8 +36,6 @@ from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
 from . import (
     _design_law,
-    _filter_gain,
-    _local_rules,
     _noise,
     _resolution,
     _sanity,
@@ -75,10 +73,6 @@ from ._sanity import GMRDataWarning
 from ._slow import band_rows, curvature_only, edge_weights, restore_slow, segments
 from ._truncation import with_truncation
 from ._velocity_noise import recorded_speed
-
-#: an x integrated from v or a hands the coordination each well's F, F', F'' only (`_slow.curvature_only`; a module
-#: switch, for the studies' before/after and the tests' teeth)
-INTEGRATED_CONDITIONS = True
 
 #: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
 DEFAULT_SOLVER = STLS(threshold=0.1, alpha=0.0, normalize_columns=True, unbias=True)
@@ -1046,7 +1040,7 @@ def reconstruct(
     for i in range(d):
         _, labels, groups = wells[i]
         xs, w = _pad_stack([[recs[k].x[:, i] for k in g] for g in groups])
-        if structured_noise or (_filter_gain.MATCHED and not measured):  # the edge fits' rows: not the taps' gain
+        if structured_noise or not measured:  # the edge fits' rows: not the taps' gain
             w = w * _pad_stack([[inner_samples(recs[k]) for k in g] for g in groups])[0]
         segs = segments(recs, groups, i)  # x integrated: each record's slow band (`_slow`)
         if segs is not None:  # the integration's ends left out
@@ -1064,13 +1058,10 @@ def reconstruct(
         band = band_rows(recs, groups, i, w, targets, library, masses, topology, segs)
         # estimated accelerations: the joint regression's columns through the filter's gain, as the local fits'
         # (`_filter_gain.gain_segments`), where its rows are not low-passed (steady sines: the harmonics carry the
-        # nonlinearity, where G < 1). Single-tone arch, x only, 50/30 dB, seeds 0-1: 1.99/1.99/5.68/5.18 % on raw
-        # columns, 0.96/1.16/2.68/2.36 % through G (seed 1 at 50 dB hops 0.067 -> 0.95 times a second, the
-        # truth 0.967); joint 10 Hz sines, 45 dB: 0.27-0.29 -> 0.02-0.03 %. Low-passed rows keep the band where
-        # G is about 1, and G there only spreads the noise of x (arch, x only, sweeps, 60 dB, seeds 0-2: 1.34/
-        # 1.38/1.12 % raw, 2.55/2.06/1.67 % through G)
+        # nonlinearity, where G < 1); low-passed rows keep the band where G is about 1, and G there only spreads
+        # the noise of x
         row_filters.append(None if measured else _derived_rows(recs, groups, i))
-        gsegs = gain_segments(recs, groups) if _filter_gain.JOINT_GAIN and row_filters[i] is None else None
+        gsegs = gain_segments(recs, groups) if row_filters[i] is None else None
         gains.append(None if gsegs is None
                      else (gsegs, _pad_stack([[matched_target(recs[k], targets[k][:, i], i, masses, topology)
                                                for k in g] for g in groups])[0]))
@@ -1080,38 +1071,36 @@ def reconstruct(
         eiv = _eiv_report(x_noise, xs, w, sols.stats.get("eiv_applied"))
         if screen_sigma is not None:
             screened = _screen(fits, screen_sigma, library)
-            if _local_rules.REFIT_SCREENED_DAMPING:  # wells that keep some damping terms (before the next rule)
-                screened = _refit_screened_damping(fits, screened, xs, vs, ys, w, library, solver, screen_sigma, i,
-                                                   failure, noise, x_noise, band)
-            if _local_rules.ONE_OF_A_GROUP:  # wells whose damping terms the screen zeroed all at once
-                screened = _one_of_a_group(fits, screened, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
-                                           noise, x_noise, band)
+            # wells that keep some damping terms (before the next rule)
+            screened = _refit_screened_damping(fits, screened, xs, vs, ys, w, library, solver, screen_sigma, i,
+                                               failure, noise, x_noise, band)
+            # wells whose damping terms the screen zeroed all at once
+            screened = _one_of_a_group(fits, screened, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
+                                       noise, x_noise, band)
             fits = screened
         codes = np.asarray(sols.result._value)
         for k in np.nonzero(codes != RESULTS.successful._value)[0]:
             failure.note(codes[k], f"DOF {i}, well {k}: local fit")
-        dropped, at_rest = [], []
-        if _local_rules.DISSIPATIVE_AT_REST:
-            fits, at_rest = _dissipative_at_rest(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
-                                                 noise, x_noise, band)
+        dropped = []
+        fits, at_rest = _dissipative_at_rest(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
+                                             noise, x_noise, band)
         if shared_damping:
             fits, dropped = _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_sigma, i,
                                                     failure, noise, x_noise, band)
-            if _local_rules.DISSIPATIVE_AT_REST:
-                fits, again = _dissipative_at_rest(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
-                                                   noise, x_noise, band, shared=True)
-                at_rest = sorted(set(at_rest) | set(again))
+            fits, again = _dissipative_at_rest(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
+                                               noise, x_noise, band, shared=True)
+            at_rest = sorted(set(at_rest) | set(again))
         damping_added = []
-        if _local_rules.EXTEND_DAMPING and screen_sigma is not None:
+        if screen_sigma is not None:
             fits, damping_added = _extend_damping(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
                                                   noise, x_noise, band)
         position_added = [[] for _ in groups]
-        if _local_rules.EXTEND_POSITION_DAMPING and screen_sigma is not None:
+        if screen_sigma is not None:
             fits, position_added = _extend_position_damping(fits, xs, vs, ys, w, library, solver, screen_sigma, i,
                                                             failure, noise, x_noise, band, fitted=fitted)
         added = [[] for _ in groups]
         if extend_restoring and screen_sigma is not None:
-            fill = extend_upto == 2 and _local_rules.FILL_CURVATURE  # F'' whatever its t (`FILL_CURVATURE`)
+            fill = extend_upto == 2  # F'' whatever its t
             fits, added = _extend_restoring(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure, noise,
                                             x_noise, extend_upto, band, fill=fill)
         local.append((labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band, at_rest, damping_added,
@@ -1134,7 +1123,7 @@ def reconstruct(
         labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band, at_rest, damping_added, position_added = local[i]
         data_fits = fits  # the local fits from the data alone (reported; the resolution report reads them)
         borrowed, design_why = [], None
-        integrated = segs_all[i] is not None and INTEGRATED_CONDITIONS  # F, F', F'' only (`_slow.curvature_only`)
+        integrated = segs_all[i] is not None  # F, F', F'' only (`_slow.curvature_only`)
         if plan[i] is not None:
             fits, borrowed = _borrow(fits, plan[i], xs, vs, ys, w, library, x_noises[i], band)
         fits = curvature_only(fits, library) if integrated else fits
@@ -1169,7 +1158,7 @@ def reconstruct(
         warnings += _sanity.check_scales(i, names, xcol, labels)
         well_names = [", ".join(names[k] for k in grp) for grp in groups]
         exempt = _under_top_order(coef, library) if screen_sigma is not None else None
-        if exempt is not None:  # orders `_extend_restoring` added are kept on purpose (`FILL_CURVATURE`: whatever t)
+        if exempt is not None:  # orders `_extend_restoring` added are kept on purpose (F'': whatever t)
             for k, orders in enumerate(added):
                 exempt[k, library.indices(STIFFNESS)[list(orders)]] = True
         warnings += _sanity.check_significance(i, well_names, library.names(), coef, local_se, exempt)

@@ -170,7 +170,7 @@ def band_rows(recs, groups, i: int, w: np.ndarray, targets, library, masses, top
 
     Estimated accelerations (one Savitzky-Golay window for every DOF of a record, `_taps`): the
     target holds G[x''], G the filter's gain (`filter_gain`), so the columns pass through G too
-    (q's as well unless `RAW_LINEAR`) and the target's measured inputs (base acceleration, forces) as
+    (q's as well) and the target's measured inputs (base acceleration, forces) as
     well; where x was measured, each well's `BandRows.cross` holds the noise its columns share with the
     target (`cross_moment`), which `fit_local` takes off the normal equations. On the raw columns the gain's shortfall on the harmonics of a nonlinear term
     reads as other terms: bistable joint, x only, noise-free 0.5 degree sweep, a [1, q, q^2, q^3, v,
@@ -186,7 +186,6 @@ def band_rows(recs, groups, i: int, w: np.ndarray, targets, library, masses, top
     1 standard error)."""
     import jax.numpy as jnp
 
-    from .._fit._library import STIFFNESS
     from .._fit._local_fit import BandRows
     from .._topology import as_topology
 
@@ -195,10 +194,8 @@ def band_rows(recs, groups, i: int, w: np.ndarray, targets, library, masses, top
         return None
     from ._noise import _response
 
-    k1 = library.column(STIFFNESS, 1)
     topo, masses = as_topology(topology), np.asarray(masses, float)
     through = np.ones(library.n_terms, bool)
-    through[k1] = not _filter_gain.RAW_LINEAR
     resp = float(_response(topo, masses, recs[groups[0][0]].n_dof, i)[0][i])
     out = []
     for g, grp in enumerate(groups):
@@ -215,10 +212,7 @@ def band_rows(recs, groups, i: int, w: np.ndarray, targets, library, masses, top
             yk = np.asarray(targets[k][:, i], float)
             if gains[g][m] is not None:  # the columns through the target's filter, the inputs too
                 taps, order = gains[g][m]
-                raw = th
                 th = filter_gain(th, taps, order, r.dt)
-                if _filter_gain.RAW_LINEAR:
-                    th[:, k1] = raw[:, k1]
                 yk = matched_target(r, yk, i, masses, topo, gains[g][m])
                 c = None if order != 2 else cross_moment(r, i, r.x[:, i] - centre, wg[start:start + r.n_samples],
                                                          library, through, resp, taps)

@@ -50,12 +50,8 @@ def _power(x: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
     return np.fft.rfftfreq(x.size, dt), p
 
 
-#: the band edge counts the power above the white noise floor (`band_edge`; False: all the power, as before) ...
-ABOVE_FLOOR = True
-#: ... where the noise holds more than this share of the power the edge leaves out (1 - fraction, 0.5 %): from about
-#: 26 dB down. Above, the edge is as before (the shallow arch, x only, 30 dB, 0.45 %: the floor's 1 % shift of the
-#: edge moved one record's window from 13 to 15 samples, and seeds 0-3 went 1.3/6.3/4.7/8.0 % -> 7.9/5.3/4.5/9.3 %:
-#: the window's luck, not a gain)
+#: the band edge counts the power above the white noise floor (`band_edge`) where the noise holds more than this
+#: share of the power the edge leaves out (1 - fraction, 0.5 %): from about 26 dB down; above, all the power
 NOISE_SHARE = 0.5
 
 
@@ -63,12 +59,10 @@ def band_edge(x: np.ndarray, dt: float, fraction: float = 0.995) -> float:
     """Frequency below which `fraction` of the power of x (mean removed) above its white noise floor
     lies, in Hz. The floor, the mean level of the top fifth of the band (its periodogram's median / ln 2,
     robust to lines), is taken off every bin where the noise holds more than `NOISE_SHARE` of 1 - `fraction`
-    of the power: white noise holding more than 1 - `fraction` otherwise sets the edge inside the noise (a
-    Duffing well sampled at 20 Hz, x only: 0.37 Hz clean, 3.7 Hz at 20 dB, and the Savitzky-Golay window fell
-    from 17 samples to 7, a 60 % restoring error; with the floor off, 0.36-0.40 Hz from 60 dB to 15 dB, 0.1-0.2 %
-    error)."""
+    of the power: white noise holding more than 1 - `fraction` otherwise sets the edge inside the noise, and
+    the Savitzky-Golay window with it."""
     freqs, p = _power(x, dt)
-    if ABOVE_FLOOR and freqs.size >= 10:
+    if freqs.size >= 10:
         floor = float(np.median(p[freqs >= 0.8 * freqs[-1]])) / np.log(2.0)  # white noise's periodogram: exponential
         above = p - floor
         if floor * p.size > NOISE_SHARE * (1.0 - fraction) * np.sum(p) and np.sum(above) > 0:
