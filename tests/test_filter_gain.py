@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import gmr_jax as g
-from gmr_jax._reconstruct._filter_gain import filter_gain
+from gmr_jax._recordings._derivatives import filter_gain
 from gmr_jax._recordings._derivatives import differentiate, savgol_taps
 
 
@@ -100,7 +100,7 @@ def test_cross_moment_is_the_noise_the_columns_share_with_the_target(exclude_cen
     resolution; the raw q with the centre tap left out shares none."""
     from gmr_jax._fit._library import STIFFNESS
     from gmr_jax._reconstruct._filter_gain import _taps, cross_moment
-    from gmr_jax._reconstruct._reconstruct import regression_targets
+    from gmr_jax._recordings._recording import regression_targets
 
     dt, n, window, sd = 0.01, 3000, 31, 2e-3
     t = np.arange(n) * dt

@@ -9,7 +9,8 @@ import pytest
 
 import gmr_jax as g
 from gmr_jax._recordings._integrate import remove_drift
-from gmr_jax._reconstruct._reconstruct import _resolve, regression_targets
+from gmr_jax._reconstruct._reconstruct import _resolve
+from gmr_jax._recordings._recording import regression_targets
 from gmr_jax._reconstruct._slow import restore_slow
 from _truth import restoring_l2  # tests/_truth.py
 

@@ -538,12 +538,12 @@ def joint_coordinate(
     if v_noise is not None and gain is None and band is None:
         cols, vd = _velocity_noise(cols, u, vs, v_noise, layout)
     if gain is not None:
-        from .._reconstruct._filter_gain import apply_gain
+        from .._recordings._derivatives import apply_gain
 
         cols = np.stack([apply_gain(segs, cols[k]) for k, segs in enumerate(gain)])
         x_noise = None  # the corrected score is per raw column
     if band is not None:
-        from .._reconstruct._slow import apply_band
+        from .._recordings._integrate import apply_band
 
         cols = np.stack([apply_band(segs, cols[k]) for k, segs in enumerate(band)])
         ys = np.stack([apply_band(segs, ys[k]) for k, segs in enumerate(band)])

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from .._reconstruct._reconstruct import regression_targets
+from .._recordings._recording import regression_targets
 from .._recordings._derivatives import band_edge
 from ._catalogue import Term, basis
 

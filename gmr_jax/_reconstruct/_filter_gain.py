@@ -11,25 +11,7 @@ fits take off their normal equations (`_fit/_errors_in_variables.shifted_qr`).
 
 import numpy as np
 
-
-def filter_gain(sig: np.ndarray, taps: np.ndarray, order: int, dt: float) -> np.ndarray:
-    """`sig` (N,) or (N, p) through the gain G(w) = H(w) / (i w)^order of the Savitzky-Golay taps of
-    a derivative of `order` (H their frequency response; G(0) = 1): what the differentiation did to the
-    derivative it estimated. On the mirror-extended record (no edge jump), by FFT, along axis 0."""
-    sig = np.asarray(sig, float)
-    n = sig.shape[0]
-    ext = np.concatenate([sig, sig[::-1]], axis=0)
-    w = 2.0 * np.pi * np.fft.rfftfreq(2 * n, dt)
-    half = taps.size // 2
-    lag = np.arange(-half, half + 1) * dt
-    if order == 2:
-        h = np.cos(np.outer(w, lag)) @ taps
-        gain = np.divide(h, -(w**2), out=np.ones_like(w), where=w > 0)
-    else:
-        h = np.sin(np.outer(w, lag)) @ taps
-        gain = np.divide(h, w, out=np.ones_like(w), where=w > 0)
-    spec = np.fft.rfft(ext, axis=0) * (gain if sig.ndim == 1 else gain[:, None])
-    return np.fft.irfft(spec, n=2 * n, axis=0)[:n]
+from .._recordings._derivatives import filter_gain
 
 
 def impulse_response(taps: np.ndarray, order: int, dt: float) -> np.ndarray:
@@ -121,17 +103,6 @@ def gain_segments(recs, groups) -> list[list[tuple]] | None:
             start += n
         out.append(segs)
     return out if any_gain else None
-
-
-def apply_gain(segs, a: np.ndarray) -> np.ndarray:
-    """`a` (samples, ...) of one well with each record's rows through its filter's gain (`filter_gain`;
-    `segs` one well's list from `gain_segments`), padding and records without one left as they are."""
-    out = np.array(a, float)
-    for seg in segs:
-        if seg is not None:
-            start, stop, dt, taps, order = seg
-            out[start:stop] = filter_gain(out[start:stop], taps, order, dt)
-    return out
 
 
 def _inputs(rec, i: int, masses, topology) -> np.ndarray:

@@ -29,9 +29,9 @@ from .._fit._stls import STLS, compress, stls_qr
 from .._fit._threshold import default_thresholds, select_threshold
 from .._model._model import GlobalModel
 from .._model._predict import forces
-from .._recordings._derivatives import TONAL, band_edge, tonal_fraction
+from .._recordings._derivatives import TONAL, apply_gain, band_edge, tonal_fraction
 from .._recordings._inputs import as_recordings
-from .._recordings._recording import Recording, length_unit, validate
+from .._recordings._recording import Recording, length_unit, regression_targets, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
 from . import (
@@ -55,7 +55,7 @@ from ._degree import (
     odd_gls,
     redundancy,
 )
-from ._filter_gain import apply_gain, gain_segments, matched_target
+from ._filter_gain import gain_segments, matched_target
 from ._local_rules import (
     _dissipative_at_rest,
     _extend_damping,
@@ -76,15 +76,6 @@ from ._velocity_noise import recorded_speed
 
 #: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
 DEFAULT_SOLVER = STLS(threshold=0.1, alpha=0.0, normalize_columns=True, unbias=True)
-
-
-def regression_targets(rec: Recording, masses: np.ndarray, topology) -> np.ndarray:
-    """Force carried by each DOF (N, D): input force minus inertia, the left side of Eq. (8).
-
-    Independent: force_i - m_i a_i. Chain: sum_{k>=i} (force_k - m_k a_k), i.e. H a with H of
-    Eq. (9) written for base-first numbering (`AbstractTopology.carried`)."""
-    _, f = rec.inputs()
-    return as_topology(topology).carried(f - rec.a * masses[None, :])
 
 
 def _resolve(recordings, masses, topology, min_recordings=2, what="fit", exclude_center=False):

@@ -37,7 +37,6 @@ import numpy as np
 from .._fit._library import STIFFNESS
 from .._recordings._integrate import remove_drift
 from .._recordings._recording import Recording
-from . import _filter_gain
 from ._filter_gain import _taps, cross_moment, filter_gain, matched_target
 
 #: the curvature enters the restored shift only where the band-limited fit resolves it
@@ -150,15 +149,6 @@ def edge_weights(recs, groups) -> list[np.ndarray]:
             m[:e], m[n - e:] = 0.0, 0.0
             parts.append(m)
         out.append(np.concatenate(parts))
-    return out
-
-
-def apply_band(segs, a: np.ndarray) -> np.ndarray:
-    """`a` (samples, ...) of one well with each record's slow band removed (`remove_drift` with the mean
-    kept), padding left as it is."""
-    out = np.array(a, float)
-    for start, stop, dt, cut in segs:
-        out[start:stop] = remove_drift(out[start:stop], dt, cut, keep_mean=True)
     return out
 
 

@@ -90,6 +90,16 @@ def integrate(s: np.ndarray, dt: float, f_hp: float, times: int = 1) -> np.ndarr
     return remove_drift(detrend(y, times), dt, f_hp)
 
 
+def apply_band(segs, a: np.ndarray) -> np.ndarray:
+    """`a` (samples, ...) of one well with each record's slow band removed (`remove_drift` with the mean
+    kept), padding left as it is; `segs`: one well's (start, stop, dt, cut-off) per record, as
+    `_reconstruct/_slow.segments` gives them."""
+    out = np.array(a, float)
+    for start, stop, dt, cut in segs:
+        out[start:stop] = remove_drift(out[start:stop], dt, cut, keep_mean=True)
+    return out
+
+
 def integrated_signals(t, v, a, base_acc, src: str):
     """(x, v or None when v was measured, info) from a recording's measured v or a (module
     docstring); info per DOF: the source, the cut-off used and the samples."""
