@@ -856,148 +856,42 @@ def reconstruct(
     throw: bool = True,
     progress: Callable[[str], None] | None = None,
 ) -> Solution:
-    """Global model reconstruction, Algorithm 1, from small-vibration recordings.
+    """Global model reconstruction (Algorithm 1) from small-vibration recordings around each equilibrium.
+
+    At each well k of DOF i, the force the DOF carries, y = f - m a (Eq. 8), is regressed on the local library
+    Theta(x - x_k, v) (Eqs. 5-7); the wells' Taylor coefficients are then coordinated into one global law
+    (Eqs. 12-21), y = F(x) + C(x) v + sum_j B_j sgn(v)|v|^j. The cases behind each default are in
+    docs/explanation/reconstruction-defaults.md.
 
     **Arguments:**
 
-    - `recordings`: one per equilibrium (single DOF) or per configuration (chain): `Recording`s, file
-      paths (`load_recording`), or dicts or structured arrays of named signals (`{"t": t, "x": x,
-      "base_acc": b}`). Missing v/a are estimated from x (Savitzky-Golay).
-    - `library`: local library orders r, d (Eqs. 5-7).
-    - `solver`, `select`: STLS settings; `select=None` uses `solver.threshold` as given.
-    - `topology`: "chain" (default for several DOFs) or "independent".
-    - `masses`: per DOF; default from the recordings, else 1 (per unit mass).
-    - `screen_sigma`: before the coordination, a local coefficient smaller than `screen_sigma`
-      standard errors is set to zero (a t-test on each kept term): the Hermite solve takes every
-      local coefficient as exact, so an insignificant high-order term kept by the threshold
-      rule would otherwise raise the global degree and distort the model. None disables it.
-    - `well_tol`: recordings whose mean deformation of a cell differs by less than this
-      fraction of that cell's spread are taken as the same well of that cell and pooled.
-    - `keep_low_orders`: the local Taylor terms the coordination needs, the restoring law's
-      x^0 .. x^`keep_restoring_order` and the damping polynomial's v, x v, are exempt from the
-      STLS threshold (refitted on the STLS support plus these; the `screen_sigma` t-test
-      still decides whether each is kept). The CV threshold judges a term by its share of the
-      *local* force; a damping slope x v or a restoring x^3 is a tiny share of it at small
-      amplitude, yet fixes the global law between the wells. Kresling truss: the Hermite
-      interpolant from F, F', F'' at both wells is 1.3 % off (critical force 0.7 %), from
-      F to its third derivative 0.09 %; a dropped x^3 also biases the slope (RESULTS.md).
-    - `keep_restoring_order`: see `keep_low_orders`. Default (None): 3 when every recording
-      carries measured accelerations, 1 when they had to be estimated (from x or v): the
-      differentiation filter's gain error on the inertia then correlates with the amplitude and
-      a kept x^3 absorbs it (bistable joint at 1 degree from x alone: x^3 17 times too large).
-      A velocity estimated from x enters only the damping, which is small (3-cell Kresling
-      chain without its velocity channels, 30 dB: restoring error 3.9-14.5 % with the order
-      kept at 1, 2.9-3.4 % at 3, as with measured velocities 2.3-3.1 %). 2 where the accelerations
-      were differentiated once from a measured v (velocity only: x integrated from it, the slow
-      shift of its drift removal restored, `_slow`): shallow arch, v only, 0.45 %, noise-free to
-      45 dB: 14.6 % -> 7.2-9.1 % (the curvature oracle 2.6 %).
-    - `coordination`: "auto" (default), "gls" (covariance-weighted, lowest adequate degree),
-      "hermite" (the paper's exact interpolant; see `coordinate`), or "evidence": one
-      probabilistic model of every well's records (weak-form rows, a structured Gaussian prior
-      on the global law, hyperparameters and the restoring degree by evidence; the standard
-      errors and the band from its posterior covariance; `reconstruct_arrays`). On "evidence"
-      only `settings`, `masses`, `topology`, `throw` and `progress` apply.
-    - `settings`: a `ReconstructSettings` for `coordination="evidence"` (default: the
-      library's damping order, `well_tol`).
-    - `shared_damping`: the position-independent damping sgn(v)|v|^j (j != 1; j = 1 belongs
-      to the damping polynomial C(x) v) is one law shared by every well (Eq. 21). A term that
-      some wells' fits select and others do not is taken as a local artefact and dropped, and
-      the wells that had it are refitted without it (reported in `dofs[i].stats`). Typical
-      cause: an unselected x^2 v standing in as a cancelling v|v|, v^3, v^3|v| combination,
-      harmless inside the well, far off at deployment speeds (Kresling chain, 0.75 mm, seed 4:
-      base-cell damping error 8.3 % -> 0.19 %, basin agreement 60.7 % -> 94.6 %; RESULTS.md).
-    - `extend_restoring`: after the threshold rule, each well's local restoring order is raised
-      while the next Taylor term q^(r+1) is resolved (|t| >= `screen_sigma` in a refit on the
-      support plus that term; reported as `restoring_orders_added` in `dofs[i].stats`): a
-      resolved term left out biases the kept ones, and the coordination takes them as exact
-      (torque-free Kresling, deployed well: a dropped q^4 at t = 59 biased q^3 by 2 %). Default
-      (None): on when every recording carries measured accelerations (as
-      `keep_restoring_order`: with a estimated, a higher order absorbs the differentiation
-      filter's gain error); with a estimated and `structured_noise`, on up to q^2 only (the
-      curvature; at 60 dB x only the next order took the Savitzky-Golay bias for a q^3 and the
-      paper route's degree-7 law was 1650 % off), and there q^2 is kept whatever its t, with its
-      covariance (`_local_rules.FILL_CURVATURE`; magnet, x only, 30 dB: 44.8 -> 19.1 %).
+    - `recordings`: one per equilibrium (per configuration for a chain): `Recording`s, file paths
+      (`load_recording`) or dicts of named signals; missing v and a are estimated from x.
+    - `library`: local library orders r, d (Eqs. 5-7). `solver`, `select`: the STLS settings (`select=None`:
+      `solver.threshold` as given).
+    - `topology`: "chain" (default for several DOFs) or "independent". `masses`: per DOF (default: the recordings').
+    - `well_tol`: recordings whose mean deformation differs by less than this fraction of the cell's spread are one well.
+    - `screen_sigma`: local terms under this many standard errors are zeroed before the coordination (None: kept).
+    - `coordination`: "auto", "gls", "hermite" (the paper's exact interpolant) or "evidence" (one posterior over
+      every well's records, `reconstruct_arrays`; only `settings`, `masses`, `topology`, `throw`, `progress` apply).
+    - `settings`: a `ReconstructSettings` for `coordination="evidence"`.
+    - `keep_low_orders`, `keep_restoring_order`: x^0 .. x^order, v and x v are exempt from the STLS threshold (the
+      t-screen still judges them); the order defaults to 3 with measured accelerations, 2 differentiated from v, 1.
+    - `shared_damping`: one set of terms sgn(v)|v|^j (j != 1) for every well (Eq. 21).
+    - `extend_restoring`: raise each well's restoring order while the next term is resolved (default: with measured
+      accelerations; up to q^2, kept whatever its t, with estimated accelerations and `structured_noise`).
+    - `shared_design`: cells of one design lend their resolved orders as a prior (default: on unless "hermite").
+    - `structured_noise`: estimated accelerations' noise taken as it is (centre tap out, edges out, sandwich
+      covariances); default on for x integrated from v and for estimated accelerations on non-tonal records.
+    - `errors_in_variables`, `velocity_eiv`: correct for the white noise on a measured x (local fits) and on a
+      measured v (the joint regression's columns and covariance).
+    - `throw`: raise `GMRComputationError` on a numerical failure (else read `result`; NaN where it failed).
+    - `progress`: called with a short sentence at each stage, e.g. `print`.
 
-    - `shared_design`: with several DOFs, cells of one design (the same wells at the same
-      relative positions, Taylor ratios that agree across cells: `_shape_prior`) lend the
-      restoring orders their local fits resolve to the cells whose fits stop lower, as a prior
-      on those cells' own local regressions (value and slope stay their own; the prior's
-      spread, from the cells' measured differences, enters the covariance). Reported in
-      `dofs[i].stats["shared_design"]`. Default (None): on, except with `coordination="hermite"`
-      (the paper's method as published). 5-cell Kresling chains: RESULTS.md, issue 15.
-
-    - `structured_noise`: where accelerations are estimated (from x or v), take their noise for
-      what it is (results/derived_noise.md): x'' leaves each sample out of its own window
-      (`Recording.complete(exclude_center=True)`; otherwise the filter's centre weight
-      correlates the target's noise with the regressor x(t): shallow arch, x only, 30 dB, the
-      local stiffness 2.5-4 % high), the first and last half-window (the edge fit's
-      extrapolation) are left out of the fits (`inner_samples`), and the local covariances are
-      the sandwich with the noise's structure (the sensor noise through the differentiation
-      filter, from the channels' noise floors; `_fit/_target_noise.py`), not OLS, which takes
-      that noise as white and overstated the errors 2-25 times (F'' at 60 dB: se 12-24 % against
-      a scatter of 2-3 %). With it, each well's restoring series is also extended while the next
-      order is resolved, up to the curvature q^2 (`extend_restoring`). (The joint regression runs
-      on rows low-passed at 1.5 x the band edge wherever accelerations are estimated and no record is
-      a steady sine, with or without it: `_derived_rows`.) Default (None): on where every record's x
-      was integrated from a measured v (a laser vibrometer), and where accelerations are estimated and
-      no record is a steady sine (`tonal_fraction`); off otherwise. Velocity only, shallow arch, 0.45 %
-      sweeps, 45 dB, seeds 0-1: F''/2 from the rows without the slow band (`_slow.band_rows`) scatters
-      by 0.82/1.77 where OLS gives standard errors of 4.6/5.6, so the GLS took the cubic (14.6 % off);
-      with it 4.43/1.20 % (the curvature oracle 2.6 %). Shallow arch, x only, 0.45 % sweeps: 1.3-3.3 %
-      from noise-free to 30 dB (without it 14.5 % at 45-60 dB, the cubic); magnetic bistable, x only:
-      18.5-18.6 % at 60-45 dB (oracle 20.8 %; without it 45 %), at 30 dB 45 % either way
-      (results/derived_accelerations.md). It became the default on sweeps once the rows pass through
-      the differentiation filter's gain (`_filter_gain.filter_gain`) and the wells share their damping terms
-      by BIC (`_share_velocity_damping`): before, on notebook 06's displacement-only joint records (40
-      dB), the filter's gain on the third harmonic of the v^3 damping biased v^3 low and a linear v up
-      (2-5 OLS standard errors over seeds; a noise-free record: v 0.64 for 0, v^3 9.66 for 10), the
-      model kept spurious v and x v terms and `refine` made the holdout worse (5.49 -> 6.19 %). Now
-      0.040 % restoring and 0.13 % damping error there (the default before: 0.135 % and 4.64 %). On
-      steady sines (bistable joint, 10 Hz, x only; results/joint_sine_records.md) it is better at
-      45-30 dB, worse at 60 dB, and stays opt-in there.
-
-    - `errors_in_variables`: where x is measured with its accelerations (the noise of x and of
-      the target are independent), each local fit is corrected for the white noise on x (its
-      variance from the channel's spectral floor; the corrected score, `_fit/_errors_in_variables.py`):
-      least squares on a noisy q attenuates the slope and biases the higher powers, and the
-      coordination takes the local coefficients as exact. 2-cell cubic chain at 30 dB: local F'
-      4.1 standard errors low on average, restoring error of the stiff cell up to 10.6 % (a
-      degree-7 law for a cubic truth); corrected, F' within 0.1 standard errors and 0.06 %.
-      Reported per well in `dofs[i].stats["errors_in_variables"]`; False: plain least squares.
-    - `velocity_eiv`: the joint regression (route "joint", "gls + joint damping") corrects its
-      velocity columns for the white noise on a measured v (`_joint._velocity_noise`; not where v
-      is estimated, x integrated from v or a estimated from v), and its covariance for the
-      residual that noise leaves, largest where |v| is (`_joint._sandwich`, never narrower than
-      sigma^2 A^-1). Bistable joint (10 v^3), 5 degrees, 30 dB, 4 seeds: v^3 9.28-9.49 (7-10
-      standard errors low) -> 9.90-10.04 (within 1.7); the magnet's damping band at 40 dB holds the
-      truth on 100 % of its span instead of 60 % (`studies/velocity_noise.py`, `studies/coverage.py`).
-      A velocity term the score keeps is tested again on that covariance (`_joint._robust_velocity_set`).
-      On route "auto", the paper route's damping (local fits that take v as exact) gives way to the
-      corrected joint damping where the noise moves it by more than a standard error (`_velocity_noise.V_NOISE_DAMPING`).
-      Reported per well in `dofs[i].stats["velocity_noise"]`; False: the velocity columns taken
-      as measured.
-    - `throw`: raise `GMRComputationError` on a numerical failure (a local fit or the
-      coordination); with False, read `result` (the model then holds NaN where it failed).
-    - `progress`: called with a short sentence at each stage (per DOF: local fits,
-      coordination; then the checks), e.g. `print`; the command line prints them with times.
-
-    **Returns:** a `Solution` whose `value` is the `GlobalModel` (standard errors attached:
-    the local fits' noise propagated through the coordination; and `covariance`, the calibrated
-    covariance of each DOF's coefficients that `force_band` and `sample_models` use: that
-    propagated noise with the coordination's residual scale plus a model-discrepancy term for
-    what the local data do not fix between the wells, see `_coordination/_discrepancy.py`; on
-    the joint route its posterior covariance plus the degree choice's discrepancy),
-    `result` a `RESULTS` code, and `stats`: `method` ("GMR"), `library`, `dofs` (per-DOF
-    `DofReport`: equilibria, local coefficients and standard errors, thresholds, global orders,
-    condition numbers), `training` (R² and NRMSE per recording and DOF), `warnings` (plain-words
-    findings of the physical sanity checks, `_sanity`: clipped channels, a driven record
-    without its input, records that leave their well or are not small, poor training R²,
-    insignificant kept terms, a global law with spurious outer wells, an outward escape near
-    the data or a blow-up between the wells; each is also emitted as a `GMRDataWarning`).
-
-    User mistakes (no recordings, one equilibrium only, two recordings of one well, files
-    with different masses, inconsistent shapes) raise `GMRInputError` before anything is
-    computed.
+    **Returns:** a `Solution`: `value` the `GlobalModel` with standard errors and the calibrated `covariance`
+    (`force_band`, `sample_models`), `result` a `RESULTS` code, `stats` with `method`, `library`, `dofs` (a
+    `DofReport` per DOF), `training` (R², NRMSE) and `warnings` (the checks' findings, also `GMRDataWarning`s).
+    User mistakes raise `GMRInputError` before anything is computed.
     """
     recordings = as_recordings(recordings)  # paths and arrays as well as Recordings
     if coordination == "evidence":
