@@ -112,8 +112,7 @@ def _resolve(recordings, masses, topology, min_recordings=2, what="fit", exclude
         forced = [r.name for r in recs if r.force is not None and np.any(np.asarray(r.force) != 0)]
         if not found and forced:
             # a force input does not scale out as a base input does: y = force - m a is wrong for every m but the
-            # true one (audit 8: a 0.1 kg oscillator driven by a shaker force, no mass given: damping 10x off,
-            # a degree-7 law, and the warnings blamed hops between wells)
+            # true one
             warnings.append(f"no masses given (none in the recordings, no masses=/--masses) and {forced[0]}"
                             f"{' and others are' if len(forced) > 1 else ' is'} driven by a force: each mass is taken "
                             f"as 1, and with a force input that is not a rescaling (the fit balances the force "
@@ -205,8 +204,7 @@ def _pad_stack(chunks: list[list[np.ndarray]]):
 def inner_samples(rec: Recording) -> np.ndarray:
     """(N,) 1 where the recording's estimated acceleration is a window's centre estimate, 0 on
     the first and last half-window (scipy's edge fit extrapolates there: ten times the noise,
-    correlated with x; 3000 samples, x only, 30 dB: with them the local stiffness 1.2 % low and
-    its scatter doubled). All 1 where the accelerations were measured."""
+    correlated with x). All 1 where the accelerations were measured."""
     out = np.ones(rec.n_samples)
     windows = [w for w in ((rec.derivation or {}).get("a") or {}).get("windows", []) if w]
     if windows:
@@ -290,8 +288,7 @@ def training_scores(model: GlobalModel, recs, masses, topology, rows=None) -> di
     DOF, the low-pass of the joint regression's rows where its accelerations were estimated
     (`_derived_rows`, None elsewhere); those DOFs also get "r2_in_band" (per DOF, None where no
     filter), the R² of both forces low-passed alike (the filter's ends left out), which the fit-quality
-    check reads: above the response's band the estimated force is differentiation noise (shallow arch,
-    x only, 30 dB: raw R² 0.15 and 0.06 on a model 1.34 % off)."""
+    check reads: above the response's band the estimated force is differentiation noise."""
     out = {}
     for r in recs:
         y = regression_targets(r, masses, topology)
@@ -329,18 +326,15 @@ JOINT_R2_SLACK = 0.25
 
 #: ... and the replacement is chosen among the joint's admissible candidates within this score (-2 log
 #: evidence) of the best by the tamest extrapolation (`JointSettings.tie`; 6: "strong" evidence on
-#: Kass and Raftery's scale decides, anything less does not). Single-tone arch, x, v, a at 50 dB, seed 0:
-#: v^3 beats v|v| by 2.4 on data at |v| <= 0.2, damps 5 x too hard at 3 and halves the hop rate.
+#: Kass and Raftery's scale decides, anything less does not)
 REPLACEMENT_TIE = 6.0
 
 
 def _replacement_settings(paper: Solution) -> JointSettings:
     """The joint regression that may replace a paper route of degree K: degrees up to the first
     odd one above K (room to confine; higher degrees fit the wells' data no better and wiggle
-    where no datum is: arch, x 50 dB, seed 1: degree 13, 6 % restoring error against 2 % at 7). That cap is a
-    choice against wiggles, not the data's limit: no truncation tail in its band (`JointSettings.truncation`;
-    arch, x v a, 0.45 % sweeps, 30 dB: degrees 3, 5, 7 converge at ratio 0.73 and the tail doubled a band of
-    +-16 % about a law 1.2 % off)."""
+    where no datum is). That cap is a choice against wiggles, not the data's limit: no truncation tail in its
+    band (`JointSettings.truncation`)."""
     k = int(np.asarray(paper.stats["K_r"]))
     return JointSettings(max_degree=min(max(k + 2 if k % 2 else k + 1, 3), JointSettings().max_degree),
                          tie=REPLACEMENT_TIE, truncation=False)
@@ -380,8 +374,7 @@ def _paper_route_faults(coord: Solution, fits: LocalFit, xs, vs, ys, w, speed: f
         if not r2 >= _sanity.MIN_R2:
             faults["data"].append(f"it explains the data of the well at x = {float(x0):.4g} poorly (R² {r2:.3g})")
     # an interpolant that blew up between the wells (rule 9 c) explains each well's own data, yet no
-    # datum supports it where it is used (bistable joint, 10 Hz sine records, x only, 60 dB, seeds 0-1:
-    # an 11th-degree law 1e6 % off, kept with a warning)
+    # datum supports it where it is used
     b = _sanity.blowup(g.stiffness, eq, np.asarray(fits.coef)[:, library.column(STIFFNESS, 1)])
     if b is not None:
         faults["blowup"].append(f"it blows up between the wells (|F| reaches {b['force']:.4g} at x = {b['x']:.4g}, "
@@ -395,9 +388,7 @@ def _paper_route_faults(coord: Solution, fits: LocalFit, xs, vs, ys, w, speed: f
 UNDETERMINED = 0.25
 def _undetermined(coord: Solution, fits: LocalFit) -> float:
     """Two standard errors of the paper route's restoring force over the wells' span (RMS; the coordination's
-    covariance, propagated from the local fits), relative to the force's RMS there; 0 where not finite. Single-tone
-    arch, x only, 30 dB, seed 0, `structured_noise`: F''/2 -51.7 (15) at one well for the truth's -23.85, 3.4
-    standard errors, gave the exact quintic 51.6 % off."""
+    covariance, propagated from the local fits), relative to the force's RMS there; 0 where not finite."""
     eq = np.asarray(fits.equilibrium, float)
     k = np.asarray(coord.value.stiffness, float)
     cov = np.asarray(coord.aux, float)[: k.size, : k.size]
@@ -434,8 +425,7 @@ def _derived_rows(recs, groups, i: int) -> RowFilter | None:
     were estimated: cut from the highest 99.5 % band edge of their x; None where the recordings'
     sampling steps differ (the padded rows are filtered sample by sample) or where a record is a
     steady sine (`tonal_fraction` >= `TONAL`): its nonlinearity speaks through the harmonics, above the
-    cut (bistable joint, 10 Hz sine records, x only, 45 and 30 dB seeds 1-2: 0.27-9.0 % unfiltered,
-    2.6-16.7 % filtered, degree 7 for 3)."""
+    cut."""
     members = [recs[k] for g in groups for k in g]
     dts = np.array([r.dt for r in members])
     if np.ptp(dts) > 1e-6 * dts.max():
@@ -486,8 +476,7 @@ def _joint(fits: LocalFit, xs, vs, ys, w, speed: float, restoring: Solution | No
         cov[nk:, nk:] = cov_j[settings.max_degree + 1 :, settings.max_degree + 1 :]
         # prior-data conflict (`_joint.CONFLICT`): the data reject every admissible damping law; the one they
         # prefer differs from the chosen one by a discrepancy of its form, not noise, which enters whole (as on
-        # the joint route, `_calibrated`). Bistable joint, 50 x^2 v, 30 dB, seed 2: C(0) 13.7 for the truth's 0,
-        # 10 standard errors off without it; the law the data prefer has C(0) = -1.3
+        # the joint route, `_calibrated`)
         free = np.asarray(stats.get("joint_unconstrained", []), float)[settings.max_degree + 1 :]
         if free.size == nj and float(stats.get("joint_conflict", 0.0)) > JOINT_CONFLICT:
             cov[nk:, nk:] += np.outer(free, free)
@@ -596,9 +585,7 @@ def _truncation_degree(coord: Solution, fits: LocalFit, xs, vs, ys, w, library: 
     if alt.result != RESULTS.successful or not np.all(np.isfinite(np.asarray(alt.value.flat()))):
         return coord, []
     alt.stats["max_degree_r"] = k
-    # the degree choice's discrepancy: the next odd degree's law less this one, in the band (`_calibrated`).
-    # Shallow arch (non-polynomial), 30 dB, seed 2: degree 5 for 6 (then the odd 7), 2.9 % off for 1.4 %; its
-    # band covered the truth on 65 % of the box, 75 % with the spread to the degree-6 law, 92.5 % with this
+    # the degree choice's discrepancy: the next odd degree's law less this one, in the band (`_calibrated`)
     other = odd_gls(fits, library, k + 2)
     other = coord if other is None else other
     alt.stats["truncation_alternative"] = (np.asarray(other.value.stiffness, float)
@@ -652,15 +639,10 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                 # motion): the joint regression replaces it where it explains every well as well.
                 # Redundant conditions confirm a law that turns outward (the NES truth does, and crosses zero again
                 # within the span checked), never an even degree: that comes from a term resolved at some wells
-                # only, or from local coefficients the truncated Taylor series biased (NES, orders 3, 3, seed 0:
-                # at 30 dB F''' at one well, t = 3.3, gave a degree-8 law 6 % off, "confirmed" by one redundant
-                # condition, now the joint law 1.34 %; at 40 dB 1.92 -> 1.36 %; at 60 dB 0.244 -> 0.288 %, the
-                # odd GLS of degree 9, its band covering the truth on 57 % of the box instead of 19 %)
+                # only, or from local coefficients the truncated Taylor series biased
                 even = degree(paper.value.stiffness) % 2 == 0
                 unconfirmed = bool(faults["restoring"]) and (redundancy(paper) == 0 or even)
-                # ... and only where the motions the model is used on reach the escape (the 5-cell
-                # Kresling tip cell's quintic turns outward far beyond its energy bound: the joint
-                # regression there cost 1.41 % -> 3.56 % restoring error for nothing)
+                # ... and only where the motions the model is used on reach the escape
                 reach = _sanity.reachable_escapes(paper.value.stiffness, fits.equilibrium, energy)
                 # An even degree (a term resolved at some wells only) gives way to the highest odd degree
                 # below it, fitted to all the local conditions, where that one is admissible and the
@@ -673,10 +655,9 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                            "as many conditions as coefficients: it interpolates them")
                     why = why + [f"replaced by the odd degree-{int(odd.stats['K_r'])} law fitted to all the local "
                                  f"conditions (an even degree cannot confine; {fit})"]
-                # ... but an even degree cannot confine on both sides whatever the bound says (magnetic
-                # bistable, 30 dB, F'' resolved at one well only: an exact quartic kept for want of a
-                # reachable escape was 72 % off, the joint law 45 %; a paper law replaced by the odd degree
-                # above is no longer unconfirmed, so `even` is still that of the law this test judges)
+                # ... but an even degree cannot confine on both sides whatever the bound says (a paper law
+                # replaced by the odd degree above is no longer unconfirmed, so `even` is still that of the law
+                # this test judges)
                 if unconfirmed and not reach and not even:
                     why = why + ["kept: no motion within the model's energy bound "
                                  f"({energy:.3g}) reaches an escape"]
@@ -773,11 +754,9 @@ DESIGN_NARROWING = 3.0
 def _pool_laws(stiff: list, vdamp: list, pdamp: list, covs: list, reports: list, recs, noise=None) -> list[str]:
     """`_design_law.pool_design_laws` on every DOF's law and calibrated covariance, in place; the
     outcome per DOF goes to `reports[i].stats["shared_design"]["law"]`. Returns the warnings of the DOFs whose band
-    between the wells the pooling narrowed by more than `DESIGN_NARROWING` (audit, a 3-cell chain of tanh-law cells
-    10-20 % apart in their parameters, 60 dB: two cells' laws, 17 and 28 % off the truth, agreed with each other to
-    0.2 % (they err alike: one non-polynomial shape interpolated from the same Taylor orders), were pooled as one
-    design, and their bands fell from +-54 / 109 % to +-3.5 %, the truth inside on 16-30 % of the span; the pooling
-    cannot tell a shared error from a shared law)."""
+    between the wells the pooling narrowed by more than `DESIGN_NARROWING` (cells whose laws err alike, one
+    non-polynomial shape interpolated from the same Taylor orders, agree with each other: the pooling cannot tell a
+    shared error from a shared law)."""
     said = []
     sizes = [(a.size, b.size, c.size) for a, b, c in zip(stiff, vdamp, pdamp)]
     ok = [np.asarray(cv).shape == (sum(n),) * 2 for cv, n in zip(covs, sizes)]
@@ -990,8 +969,7 @@ def reconstruct(
                                             x_noise, extend_upto, band, fill=fill)
         local.append((labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band, at_rest, damping_added,
                       position_added))
-        # estimated accelerations: the joint regression on low-passed rows (`row_filter`; shallow arch, x only,
-        # 30 dB, 0.45 % sweeps, seeds 0-1: 8.31/8.81 % on raw rows, degree 13; 1.35/6.11 % filtered, degree 7)
+        # estimated accelerations: the joint regression on low-passed rows (`row_filter`)
         segs_all.append(segs)
         noises.append(noise)
         x_noises.append(x_noise)
@@ -1018,8 +996,7 @@ def reconstruct(
             x_noise=x_noises[i], rows=row_filters[i], band=band, segs=segs_all[i], gain=gains[i], v_noise=v_noises[i])
         if any(borrowed) and route == "joint":
             # the law with the borrowed orders was inadmissible and the joint regression (which sees
-            # only this cell's data) would replace it: the cell goes on alone (torque-free Kresling,
-            # 1 mm, seed 3, cell 4: an outward-turning nonic, then a joint law 86 % off)
+            # only this cell's data) would replace it: the cell goes on alone
             faults = [n for n in why if n not in coord.stats.get("degree_notes", [])]  # not the degree's notes
             design_why = "the borrowed orders gave an inadmissible law: " + "; ".join(faults[:1])
             fits, borrowed = (curvature_only(data_fits, library) if integrated else data_fits), []
@@ -1071,7 +1048,6 @@ def reconstruct(
         g, cov_i = _calibrated(coord, fits, library, route, paper_sound, confining or any(borrowed))
         # a well that fixes the damping's value only: the slope it leaves open, in the band (`_damping_slopes`);
         # not where the joint regression fitted the damping to every well's data with its own position terms
-        # (magnet, 0.05 sweeps, 60 dB: the joint's constant C, band 0.056 % wide, would be 2.96 % wide)
         if "joint" not in route:
             slopes = unresolved_slopes(data_fits, xs, vs, ys, w, library, solver, noises[i], x_noises[i], band)
             cov_i = add_slope_vectors(cov_i, *(np.asarray(a).shape[0] for a in (g.stiffness, g.velocity_damping,
@@ -1240,8 +1216,8 @@ def gmc_sindy(
 
 
 def _baseline_faults(model: GlobalModel, recs) -> list[str]:
-    """GMC-SINDy's model held to GMR's admissibility (audit: a baseline damping law that feeds energy in between the
-    wells, or a restoring force with wells the data do not have, came without a word): per DOF with two or more
+    """GMC-SINDy's model held to GMR's admissibility (a baseline damping law that feeds energy in between the
+    wells, or a restoring force with wells the data do not have): per DOF with two or more
     wells (recordings grouped as `reconstruct` groups them), `restoring_faults` over the wells' span widened by half
     of it, and `damping_faults` there up to the speed of a fall from anywhere in that span to the lowest well."""
     out = []
