@@ -61,11 +61,8 @@ from ._model._uncertainty import ForceBand as ForceBand, force_band as force_ban
 from ._model._pysindy import from_pysindy as from_pysindy, to_pysindy as to_pysindy
 
 # reconstruction (Algorithm 1) and the GMC-SINDy baseline
-from ._reconstruct._reconstruct import (
-    gmc_sindy as gmc_sindy,
-    reconstruct as reconstruct,
-    regression_targets as regression_targets,
-)
+from ._reconstruct._reconstruct import gmc_sindy as gmc_sindy, reconstruct as reconstruct
+from ._recordings._recording import regression_targets as regression_targets
 from ._reconstruct._resolution import ResolutionReport as ResolutionReport
 from ._reconstruct._estimator import (
     ReconstructSettings as ReconstructSettings,

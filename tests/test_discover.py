@@ -309,37 +309,28 @@ def test_summary_says_a_term_is_missing_when_the_bootstrap_splits_it_between_can
     assert summary(report(0.0)).startswith("Nothing missing")
 
 
-@pytest.mark.slow  # two discoveries of a 20 s scenario (~30 s)
-def test_coulomb_from_a_noisy_v_leaves_out_the_samples_where_its_sign_is_uncertain(monkeypatch):
+@pytest.mark.slow  # a discovery of a 20 s scenario (~15 s)
+def test_coulomb_from_a_noisy_v_leaves_out_the_samples_where_its_sign_is_uncertain():
     """`_equation.sign_certain`: sgn(v) of a measured v flips where |v| is within its noise, and biases the Coulomb
     finding low with an interval that excludes the truth (30 dB: 0.595, 95 % CI 0.517-0.667, for 0.673; the
     viscous term pushed up). Without those samples (|v| within 3 noise sd): 0.670 (0.582-0.759)."""
-    import gmr_jax._discover._discover as disc
-
     eff = (gmr_jax.Term(0, "velocity_damping", 0), 0.15, gmr_jax.Term(0, "velocity_damping", 1))
     sc = _scenario(eff, snr_db=30.0)
     b = build_full(sc)
-    out = {}
-    for on in (True, False):
-        monkeypatch.setattr(disc, "SIGN_CERTAIN", on)
-        rep = gmr_jax.discover(b.model, b.est, b.hold, rule=RULE).value
-        f = [f for f in rep.findings if f["physics"] == "coulomb_friction"]
-        assert len(f) == 1, rep.summary()
-        out[on] = (f[0]["coefficient"], *f[0]["ci95"])
-    c, lo, hi = out[True]
-    assert lo <= b.c_eff <= hi and abs(c - b.c_eff) < 0.02 * b.c_eff, (out, b.c_eff)
-    assert out[False][2] < b.c_eff, (out, b.c_eff)  # the rule off: the interval below the truth (teeth)
+    rep = gmr_jax.discover(b.model, b.est, b.hold, rule=RULE).value
+    f = [f for f in rep.findings if f["physics"] == "coulomb_friction"]
+    assert len(f) == 1, rep.summary()
+    c, (lo, hi) = f[0]["coefficient"], f[0]["ci95"]
+    assert lo <= b.c_eff <= hi and abs(c - b.c_eff) < 0.02 * b.c_eff, (c, lo, hi, b.c_eff)
 
 
-@pytest.mark.slow  # two discoveries of a 30 s record (~40 s)
-def test_coulomb_from_x_only_leaves_out_the_rows_at_each_reversal(monkeypatch):
+@pytest.mark.slow  # a discovery of a 30 s record (~20 s)
+def test_coulomb_from_x_only_leaves_out_the_rows_at_each_reversal():
     """Where v and a are estimated from x, the derivative window straddles the friction's jump at each reversal of
     v: strong-form rows there mix its two sides and bias the Coulomb term low with a tight interval (a hand-made
     linear oscillator, x only, noise-free: 8.85 N, 95 % CI 8.80-8.90, for 9.42). Leaving out half a window either
-    side of each reversal (`_equation.REVERSALS`) gives the truth (simulated here by RK4 at a tenth of the sample
-    step, the sign's switch located within it)."""
-    import gmr_jax._discover._equation as eq
-
+    side of each reversal (`_equation.sign_certain`) gives the truth (simulated here by RK4 at a tenth of the
+    sample step, the sign's switch located within it)."""
     k, c, fc = (2 * np.pi * 1.5) ** 2, 0.4, 3.0
     rng = np.random.default_rng(3)
     freqs, phases = np.linspace(0.3, 4.0, 25), rng.uniform(0, 2 * np.pi, 25)
@@ -370,14 +361,9 @@ def test_coulomb_from_x_only_leaves_out_the_rows_at_each_reversal(monkeypatch):
     model = gmr_jax.from_terms([1.0], [{"dof": 0, "physics": "stiffness", "order": 1, "coefficient": k},
                                        {"dof": 0, "physics": "velocity_damping", "order": 1, "coefficient": c}],
                                topology="independent")
-    got = {}
-    for on in (True, False):
-        monkeypatch.setattr(eq, "REVERSALS", on)
-        rep = gmr_jax.discover(model, [est], [hold], rule=RULE, form="strong").value
-        (f,) = [f for f in rep.findings if f["physics"] == "coulomb_friction"]
-        got[on] = f["coefficient"]
-    assert abs(got[True] - fc) < 0.01 * fc, got
-    assert abs(got[False] - fc) > 3 * abs(got[True] - fc) and abs(got[False] - fc) > 0.02 * fc, got  # the teeth
+    rep = gmr_jax.discover(model, [est], [hold], rule=RULE, form="strong").value
+    (f,) = [f for f in rep.findings if f["physics"] == "coulomb_friction"]
+    assert abs(f["coefficient"] - fc) < 0.01 * fc, f  # 8.85 with the reversals' rows in
 
 
 def test_an_augmented_damping_that_feeds_energy_in_is_warned():

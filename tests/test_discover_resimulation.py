@@ -19,8 +19,9 @@ from scipy.integrate import solve_ivp
 from scipy.interpolate import CubicSpline
 
 import gmr_jax
-from gmr_jax._discover._discover import sim_start, smooth_input
-from gmr_jax._discover._offset import comparable, place
+from gmr_jax._simulate._free_run import sim_start
+from gmr_jax._simulate._inputs import smooth_input
+from gmr_jax._simulate._offset import comparable, place
 from studies.discover_scenarios import CONFOUNDED, CONTROLS, SCENARIOS
 from studies.scenarios import build_full
 

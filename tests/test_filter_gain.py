@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import gmr_jax as g
-from gmr_jax._reconstruct._filter_gain import filter_gain
+from gmr_jax._recordings._derivatives import filter_gain
 from gmr_jax._recordings._derivatives import differentiate, savgol_taps
 
 
@@ -61,7 +61,7 @@ def test_displacement_only_sweeps_keep_the_true_damping_law():
 
 
 @pytest.mark.parametrize("seed", [0, 2])
-def test_joint_regression_on_steady_sines_takes_the_gain(seed, monkeypatch):
+def test_joint_regression_on_steady_sines_takes_the_gain(seed):
     """Bistable joint, x only, the steady response to a 10 Hz base sine about each well, 45 dB
     (`studies/joint_sine_records.py`): the joint regression's target holds G[x''] (its rows are not
     low-passed on a sine, the harmonics carry the nonlinearity), so its columns pass through G too
@@ -69,8 +69,6 @@ def test_joint_regression_on_steady_sines_takes_the_gain(seed, monkeypatch):
     through G, against the truth's cubic (NumPy)."""
     import jax
     import jax.numpy as jnp
-
-    from gmr_jax._reconstruct import _filter_gain
 
     joint = g.systems.bistable_joint()
     ts = jnp.arange(5001) / 1000.0
@@ -90,9 +88,7 @@ def test_joint_regression_on_steady_sines_takes_the_gain(seed, monkeypatch):
         fit = np.polynomial.polynomial.polyval(grid, np.asarray(sol.value.stiffness[0]))  # seed 0 (v^3 resolved)
         return np.linalg.norm(fit - truth) / np.linalg.norm(truth)
 
-    assert error() < 1e-3  # measured 0.020 / 0.027 %
-    monkeypatch.setattr(_filter_gain, "JOINT_GAIN", False)
-    assert error() > 2e-3  # raw columns: 0.268 / 0.291 %: the test has teeth
+    assert error() < 1e-3  # measured 0.020 / 0.027 % (0.27-0.29 % on raw columns)
 
 
 @pytest.mark.parametrize("exclude_center", [False, True])
@@ -104,7 +100,7 @@ def test_cross_moment_is_the_noise_the_columns_share_with_the_target(exclude_cen
     resolution; the raw q with the centre tap left out shares none."""
     from gmr_jax._fit._library import STIFFNESS
     from gmr_jax._reconstruct._filter_gain import _taps, cross_moment
-    from gmr_jax._reconstruct._reconstruct import regression_targets
+    from gmr_jax._recordings._recording import regression_targets
 
     dt, n, window, sd = 0.01, 3000, 31, 2e-3
     t = np.arange(n) * dt

@@ -85,3 +85,52 @@ def test_version_comes_from_metadata():
     except md.PackageNotFoundError:
         assert gmr_jax.__version__ == "0+unknown"
     assert (Path(gmr_jax.__file__).parent / "py.typed").exists()
+
+
+def _imported_modules(path: Path, source: str | None = None) -> set[str]:
+    """Every module `path` (a module of gmr_jax; its text, or `source` in its place) imports, absolute, at any
+    depth of its code: `import a.b`, `from a import b` (a and a.b) and relative imports resolved against the
+    module's package."""
+    package = path.relative_to(ROOT).with_suffix("").parts[:-1]  # ("gmr_jax", "_coordination")
+    if path.name == "__init__.py":
+        package = path.relative_to(ROOT).parts[:-1]
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8") if source is None else source)):
+        if isinstance(node, ast.Import):
+            out |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            base = list(package[: len(package) - node.level + 1]) if node.level else []
+            mod = ".".join(base + ([node.module] if node.module else []))
+            out.add(mod)
+            out |= {f"{mod}.{a.name}" for a in node.names}
+    return out
+
+
+#: (lower layer, upper layer): no module under the first imports anything under the second
+LAYERS = [("_coordination", "_reconstruct"), ("_model", "_discover"), ("_simulate", "_discover")]
+
+
+def _layer_violations(root: Path) -> list[str]:
+    bad = []
+    for lower, upper in LAYERS:
+        for path in sorted((root / "gmr_jax" / lower).rglob("*.py")):
+            hits = sorted(m for m in _imported_modules(path)
+                          if m == f"gmr_jax.{upper}" or m.startswith(f"gmr_jax.{upper}."))
+            bad += [f"{path.relative_to(root)} imports {m}" for m in hits]
+    return bad
+
+
+def test_lower_layers_import_nothing_from_the_upper_ones():
+    """The coordination imports nothing from the reconstruction, the model and the simulation nothing from
+    discovery (absolute and relative imports, at module level or inside a function)."""
+    assert _layer_violations(ROOT) == []
+
+
+def test_layer_check_catches_each_import_form():
+    path = ROOT / "gmr_jax" / "_coordination" / "_probe.py"  # not written: its source is given
+    for line in ("from .._reconstruct._slow import apply_band", "from gmr_jax._reconstruct import _slow",
+                 "import gmr_jax._reconstruct._slow", "from .. import _reconstruct",
+                 "def f():\n    from .._reconstruct._filter_gain import apply_gain"):
+        found = _imported_modules(path, line)
+        assert any(m == "gmr_jax._reconstruct" or m.startswith("gmr_jax._reconstruct.") for m in found), line
+    assert not any("_reconstruct" in m for m in _imported_modules(path, "from .._fit._library import Library"))

@@ -70,16 +70,7 @@ from ._hermite import monomial_map
 #: Damping power D v below -this x its largest value on the check grid counts as feeding energy in
 #: (a damping law that is zero at a point, like the joint's 50 x^2 v, fits slightly negative there).
 DISSIPATION_TOLERANCE = 1e-3
-#: the velocity correction's covariance: the corrected score's sandwich where it is wider (`_sandwich`)
-SANDWICH = True
-#: ... and the velocity terms the score keeps are tested again against it (`_robust_velocity_set`): the score's
-#: Gaussian likelihood takes the residual as uniform, so where the noise of v makes it grow with |v| a term is
-#: judged on a variance several times too small (bistable joint, 10 v^3, 5 degrees, 30 dB, seed 4's sweeps, 40 fresh
-#: draws of v's noise, joint route: v|v| beside v^3 in 10 of 40, by 1-9 in the score, its coefficient 0.26-1.34 and
-#: the viscous one pulled to -1.12 on average, the viscous term's mean -0.30 +- 0.07 for the truth's 0; re-tested,
-#: v^3 alone in 40 of 40, -0.018 +- 0.045, as the corrected normal equations of that law solved directly)
-ROBUST_VELOCITY_SET = True
-#: ... in the damping-only regression (the restoring force fixed by the paper route), at each speed of the check
+#: The dissipation check in the damping-only regression (the restoring force fixed by the paper route), at each speed of the check
 #: grid against the largest |D v| at that speed, the speeds geometric from `DISSIPATION_SLOWEST` x the bound up to
 #: it: a law whose top power of v dominates at the bound cannot hide a negative viscous term below it, where every
 #: motion turns and a free decay ends (bistable joint, 10 v^3, 5 degree sweeps, 30 dB, seed 4: -3.76 v + 2.72 v|v|
@@ -104,13 +95,8 @@ SIGN_GRID_HALF_WIDTH = 3.0
 #: candidates by more than this ("very strong" evidence on Kass and Raftery's scale): the data reject every
 #: law the admissibility rules allow. Magnet, 40 dB, seed 1 (a record that hops between the wells): 6300.
 CONFLICT = 10.0
-#: The series' truncation at the degree cap (issue 15): where the chosen degree is `max_degree`, the data ask
-#: for more terms than the law has, and the band holds the estimated tail (`_truncation`). Magnetic bistable,
-#: 0.05 sweeps, 60 dB, seed 0: degree 13 at the smallest penalty, 0.13 % off on the span, its band 0.09 % wide
-#: covering the truth on 85 % of the span; the best laws of degrees 9, 11, 13 differ by 1.78 % and 0.44 %
-#: (ratio 0.25), a tail of 0.14 %.
-TRUNCATION = True
-#: ... the convergence ratio of the last two changes is taken at most this (a tail of at most 4 x the last change)
+#: The series' truncation at the degree cap (`_truncation`): the convergence ratio of its last two changes is taken
+#: at most this (a tail of at most 4 x the last change)
 TRUNCATION_RATIO_MAX = 0.8
 
 
@@ -130,7 +116,7 @@ class JointSettings(eqx.Module):
       extrapolates most tamely wins: the lowest highest velocity power (v|v| before v^3: single-tone
       records at |v| <= 0.2 cannot tell them apart, and v^3 damps 5 x too hard at 3), then the lowest
       degrees K and J. 0: the best score.
-    - `truncation`: at `max_degree`, the band holds the series' estimated tail (`TRUNCATION`, `_truncation`);
+    - `truncation`: at `max_degree`, the band holds the series' estimated tail (`_truncation`);
       False where the cap is a choice, not the data's limit (`reconstruct`'s replacement of a paper route).
     """
 
@@ -309,7 +295,7 @@ def _covariance(i, theta, ainv, rss, edf, n, masks, cols, ys, w, gram, v_rows):
 
 def _robust_velocity_set(best, meta, lam_r, lam_d, admissible, theta, masks, n, cov) -> int:
     """The chosen candidate, or the admissible one with a subset of its velocity terms (same degrees and penalties)
-    where the dropped terms D do not earn their BIC charge on their robust covariance S (`ROBUST_VELOCITY_SET`):
+    where the dropped terms D do not earn their BIC charge on their robust covariance S:
     theta_D' S_DD^-1 theta_D < |D| log n (BIC's test of nested models as a Wald statistic). The score's own
     difference cannot be rescaled to it: its residual is the recorded samples', which holds the noise of v through
     the columns' slopes, theta' N theta, so a law whose slopes amplify less of that noise scores better whether or not
@@ -552,12 +538,12 @@ def joint_coordinate(
     if v_noise is not None and gain is None and band is None:
         cols, vd = _velocity_noise(cols, u, vs, v_noise, layout)
     if gain is not None:
-        from .._reconstruct._filter_gain import apply_gain
+        from .._recordings._derivatives import apply_gain
 
         cols = np.stack([apply_gain(segs, cols[k]) for k, segs in enumerate(gain)])
         x_noise = None  # the corrected score is per raw column
     if band is not None:
-        from .._reconstruct._slow import apply_band
+        from .._recordings._integrate import apply_band
 
         cols = np.stack([apply_band(segs, cols[k]) for k, segs in enumerate(band)])
         ys = np.stack([apply_band(segs, ys[k]) for k, segs in enumerate(band)])
@@ -628,11 +614,11 @@ def joint_coordinate(
         # one-period NRMSE of the unseen cross-well record was 16.1 %, kept 5.2 %)
         near = np.array([i for i in near if len(meta[i][2]) == len(meta[best][2])])
         best = int(min(near, key=lambda i: (max(meta[i][2], default=1), meta[i][0], meta[i][1], score[i])))
-    robust = v_rows is not None and SANDWICH
+    robust = v_rows is not None
     covariance = lambda i: _covariance(i, theta, ainv, rss, edf, n, masks, cols, ys, w, gram, v_rows if robust else None)  # noqa: E731
     dropped_terms, ranked = [], bic  # `ranked`: the scores the alternatives below are weighed by
     sigma2, cov_theta = covariance(best)
-    if robust and ROBUST_VELOCITY_SET:
+    if robust:
         chosen = _robust_velocity_set(best, meta, lam_r, lam_d, admissible, theta, masks, n, cov_theta)
         dropped_terms = sorted(set(meta[best][2]) - set(meta[chosen][2]))
         if dropped_terms:
@@ -713,7 +699,7 @@ def joint_coordinate(
 
 def _truncation(meta, theta, bic, lin, layout: _Layout, chosen, span, settings: JointSettings):
     """The covariance of the restoring series' tail where the chosen degree K is the cap `max_degree`
-    (`TRUNCATION`), with the convergence ratio rho and the tail's RMS on the wells' span (0, 0 elsewhere).
+    (`settings.truncation`), with the convergence ratio rho and the tail's RMS on the wells' span (0, 0 elsewhere).
 
     The best laws (any admissibility, the chosen damping) of degrees K, K - 2 and K - 4 differ by d_K and
     d_(K-2) (RMS on the span); their ratio rho (at most `TRUNCATION_RATIO_MAX`) is the series' convergence, and
@@ -723,7 +709,7 @@ def _truncation(meta, theta, bic, lin, layout: _Layout, chosen, span, settings: 
     band's RMS over the span is about s."""
     n = lin.shape[0]
     k, j, vel = chosen
-    if not (TRUNCATION and settings.truncation) or settings.damping_only or k != layout.k:
+    if not settings.truncation or settings.damping_only or k != layout.k:
         return np.zeros((n, n)), 0.0, 0.0
 
     def best_of(degree):

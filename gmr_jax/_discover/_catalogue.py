@@ -11,11 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING
+from .._model._model import POSITION_DAMPING_NAME, STIFFNESS_NAMES, VELOCITY_NAMES
 
-STIFFNESS_NAMES = ("preload", "linear_stiffness", "quadratic_stiffness", "cubic_stiffness",
-                   "quartic_stiffness", "quintic_stiffness")
-VELOCITY_NAMES = ("coulomb_friction", "viscous_damping", "quadratic_drag", "cubic_damping")
-POSITION_DAMPING_NAME = "position_dependent_damping"
 
 #: what each physics is, in plain words (for the readable summary).
 PLAIN = {

@@ -30,20 +30,19 @@ from .._config import relieve_map_pressure
 from .._errors import GMRInputError
 from .._solution import RESULTS, Solution, code_name, message, raise_if_failed
 from .._model._model import GlobalModel, from_terms
-from .._recordings._derivatives import auto_window, band_edge, window_choice
+from .._recordings._derivatives import window_choice
 from .._recordings._recording import Recording, validate
-from .._simulate._inputs import sampled_spline
+from .._simulate._free_run import SIM, sim_start
+from .._simulate._inputs import sampled_spline, smooth_input
 from .._simulate._integrate import Integrator
+from .._simulate._offset import comparable, place
 from .._simulate._simulate import simulate
 from ._catalogue import PLAIN, Term, default_catalogue, model_terms
 from ._equation import dof_rows, sign_certain
 from ._identify import (MASS_RANGE, VIF_MAX, DofIdentifiability, ambiguous, closest, collinear_entry, determined,
-                        explained, homogeneous, mass_believable, screen, separability_entry, vif)
+                        explained, homogeneous, mass_believable, preload_entry, screen, separability_entry, vif)
 from ._locate import locate, where_sentence
-from ._offset import comparable, place, preload_entry
 from ._select import SelectionRule, select_terms
-
-SIM = Integrator(rtol=1e-7, atol=1e-10, max_steps=400_000)
 
 
 @dataclass
@@ -93,67 +92,8 @@ class DiscoveryReport:
         return summary(self)
 
 
-#: `sign_certain` runs (a module switch, for the studies' before/after and the tests' teeth)
-SIGN_CERTAIN = True
-
-
 def _pct(a):
     return f"{100 * a:.3g} %"
-
-
-#: `smooth_input`'s cut-off over the input's band edge. At 1.5 the zero-phase Butterworth (order 4,
-#: applied twice) took 4 % off the amplitude at the band edge and up to 2.3 % (of its peak) off a pure sine (0.25 Hz at
-#: 100 Hz, interior); at 3, with the padding below, 0.01 % (0.04 % in the last seconds).
-CUTOFF_OVER_BAND = 3.0
-#: `smooth_input` leaves an input alone whose white noise holds less than this share of its power (above
-#: 60 dB): the filter would change it more than it removes (audit: a noise-free multisine at 1 kHz, changed
-#: by 0.065 % RMS, 1 % at its ends, took the exact model's free run of a crossing record to 152 %; unfiltered 0.1 %)
-INPUT_NOISE_SHARE = 1e-6
-
-
-def _cutoff(u: np.ndarray, dt: float) -> float | None:
-    """`smooth_input`'s low-pass cut-off (Hz) for an input column, or None where it is left as it is: it is
-    constant, its white noise holds less than `INPUT_NOISE_SHARE` of its power, or the cut-off is not below
-    0.45 / dt."""
-    u = np.asarray(u, float)
-    if np.std(u) == 0 or white_share(u, dt) < INPUT_NOISE_SHARE:
-        return None
-    fc = CUTOFF_OVER_BAND * band_edge(u, dt)
-    return fc if 0 < fc < 0.45 / dt else None
-
-
-def white_share(u: np.ndarray, dt: float) -> float:
-    """Share of the power of u (mean removed) held by its white noise floor: the periodogram's median
-    over the top fifth of the band, / ln 2 (`band_edge`'s floor), over every bin."""
-    from .._recordings._derivatives import _power
-
-    freqs, p = _power(u, dt)
-    if freqs.size < 10 or np.sum(p) <= 0:
-        return 0.0
-    return float(np.median(p[freqs >= 0.8 * freqs[-1]]) / np.log(2.0) * p.size / np.sum(p))
-
-
-def smooth_input(u: np.ndarray, dt: float) -> np.ndarray:
-    """Measured input without its broadband noise: zero-phase Butterworth (order 4) low-pass at
-    `CUTOFF_OVER_BAND` x the input's band edge (99.5 % of its power below); a white measurement
-    noise on the input would otherwise drive the simulated resonances. The record is padded (odd
-    extension) by three periods of the cut-off, so the filter's start-up transient stays outside it
-    (scipy's default of 15 samples left the last seconds of a 0.25 Hz sine at 100 Hz up to 97 % off).
-    Columns that are zero stay zero; a column without measurable white noise (`_cutoff`) is
-    returned unchanged, which the filter could only change.
-    """
-    u = np.asarray(u, float)
-    if u.ndim == 1:
-        return smooth_input(u[:, None], dt)[:, 0]
-    out = u.copy()
-    for k in range(u.shape[1]):
-        fc = _cutoff(u[:, k], dt)
-        if fc is not None:
-            from scipy.signal import butter, filtfilt
-
-            bb, aa = butter(4, fc * 2 * dt)
-            out[:, k] = filtfilt(bb, aa, u[:, k], padlen=min(u.shape[0] - 1, int(np.ceil(3.0 / (fc * dt)))))
-    return out
 
 
 def _simulate_x(model, rec: Recording, eps, k: int):
@@ -174,15 +114,6 @@ def _simulate_x(model, rec: Recording, eps, k: int):
     if not np.all(np.isfinite(x)):
         return None, f"its simulation on {rec.name} diverged (non-finite state)"
     return x, ""
-
-
-def sim_start(rec: Recording) -> int:
-    """First sample of the output-error simulation: half a Savitzky-Golay window in, where an
-    estimated v is an interior (not extrapolated) estimate; 0 when v was recorded."""
-    if "v" not in rec.derived:
-        return 0
-    w = max(auto_window(rec.x[:, i], rec.dt) for i in range(rec.n_dof))
-    return int(min(w // 2 + 1, rec.n_samples // 10))
 
 
 def _form_reason(asked, form, estimated, clear, decimate) -> str:
@@ -402,8 +333,8 @@ def discover(
         terms = base + cands
         rows = [dof_rows(r, model, i, terms, form=form, support=support, decimate=decimate,
                          mass_column=refit_masses) for r in recs]
-        if SIGN_CERTAIN:  # strong form: the samples where sgn(v) is uncertain left out (`_equation.sign_certain`)
-            rows = [sign_certain(rw, r, i) for rw, r in zip(rows, recs)]
+        # strong form: the samples where sgn(v) is uncertain left out (`_equation.sign_certain`)
+        rows = [sign_certain(rw, r, i) for rw, r in zip(rows, recs)]
         y = np.concatenate([r.y for r in rows])
         X = np.concatenate([r.columns for r in rows])
         Xb, Xc = X[:, : len(base)], X[:, len(base):]

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from .._reconstruct._reconstruct import regression_targets
+from .._recordings._recording import regression_targets
 from .._recordings._derivatives import band_edge
 from ._catalogue import Term, basis
 
@@ -155,8 +155,6 @@ def dof_rows(
 #: sticks: sgn(v) is not the friction's sign there)
 SIGN_SIGMAS = 3.0
 STICK = 1e-3
-#: ... and, where v was estimated from a measured x, the rows within half its derivative window of a reversal of v
-REVERSALS = True
 
 
 def sign_certain(rows: Rows, rec, dof: int) -> Rows:
@@ -184,7 +182,7 @@ def sign_certain(rows: Rows, rec, dof: int) -> Rows:
     keep = np.abs(v) > cut
     if keep.sum() < 0.5 * keep.size:
         keep = np.ones_like(keep)
-    if REVERSALS and "v" in rec.derived and "x" not in rec.derived and v.size == rec.n_samples and np.ptp(rec.x[:, dof]):
+    if "v" in rec.derived and "x" not in rec.derived and v.size == rec.n_samples and np.ptp(rec.x[:, dof]):
         half = auto_window(np.asarray(rec.x[:, dof], float), rec.dt) // 2
         flips = np.nonzero(np.sign(v[1:]) * np.sign(v[:-1]) < 0)[0]
         near = np.zeros(v.size, bool)

@@ -190,3 +190,12 @@ def ambiguous(B: np.ndarray, Xc: np.ndarray, kept: list[int], y: np.ndarray, n_e
         if best is not None:
             out.append((k, best[1], float(R[:, k] @ R[:, best[1]])))
     return out
+
+
+def preload_entry(dof: int, rec_names: list) -> dict:
+    """The not-separable entry of `preload` on a DOF whose equilibrium offset was unobservable."""
+    return {"dof": dof, "physics": "preload", "term": "1", "with": "the equilibrium offset of x",
+            "correlation": 1.0, "r2": 1.0, "vif": None,
+            "reason": (f"x was integrated from velocity or acceleration ({', '.join(rec_names)}), so its static "
+                       f"offset is unobservable and was placed by the model; a constant force trades exactly "
+                       f"against that offset: not a finding (give 'equilibrium' to make it observable)")}

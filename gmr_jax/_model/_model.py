@@ -252,11 +252,16 @@ _COV_FIX = ('the covariance is a list of {"dof": i, "terms": [[physics, order], 
             'one row per listed term; omit the key when the covariance is unknown')
 
 
+#: the `physics` names of a discovery report's terms (contracts), per stiffness and velocity order
+STIFFNESS_NAMES = ("preload", "linear_stiffness", "quadratic_stiffness", "cubic_stiffness",
+                   "quartic_stiffness", "quintic_stiffness")
+VELOCITY_NAMES = ("coulomb_friction", "viscous_damping", "quadratic_drag", "cubic_damping")
+POSITION_DAMPING_NAME = "position_dependent_damping"
+
+
 def _report_name(phys: str):
     """The model term (physics, order) of a discovery report's physics name (the catalogue's vocabulary,
     contracts), None if it is not one."""
-    from .._discover._catalogue import POSITION_DAMPING_NAME, STIFFNESS_NAMES, VELOCITY_NAMES
-
     names = ({n: (STIFFNESS, k) for k, n in enumerate(STIFFNESS_NAMES)}
              | {n: (VELOCITY_DAMPING, k) for k, n in enumerate(VELOCITY_NAMES)}
              | {POSITION_DAMPING_NAME: (POSITION_DAMPING, "the finding's 'order'")})

@@ -31,8 +31,6 @@ ORDERS = (2, 3)
 #: a kept velocity order above 1 that stays within this many standard errors of 0 beside the tested one is its
 #: stand-in, and the alternative law replaces it (the local screens' 3 sigma)
 SWAP_T = 3.0
-#: a module switch (the studies' before/after, the tests' teeth)
-ORDER_DISCREPANCY = True
 
 
 def unresolved_orders(fits, xs, vs, ys, w, library: Library, solver, velocity_damping, noise=None, x_noise=None,
@@ -52,8 +50,6 @@ def unresolved_orders(fits, xs, vs, ys, w, library: Library, solver, velocity_da
     vel = {j: terms.index((VELOCITY_DAMPING, j)) for phys, j in terms if phys == VELOCITY_DAMPING}
     n_model = np.asarray(velocity_damping).shape[0]
     out = {}
-    if not ORDER_DISCREPANCY:
-        return out
 
     def refit(k, mask):
         sol = _refit_on(xs, vs, ys, w, library, solver, fits, k, mask, noise, x_noise, band)

@@ -27,10 +27,6 @@ import numpy as np
 from .._fit._library import POSITION_DAMPING, STIFFNESS, Library
 from ._local_rules import _refit_with
 
-#: `unresolved_slopes` and `slope_vectors` enter the band (a module switch, for the studies' before/after and
-#: the tests' teeth)
-SLOPE_DISCREPANCY = True
-
 
 def unresolved_slopes(fits, xs, vs, ys, w, library: Library, solver, noise=None, x_noise=None,
                       band=None) -> tuple[np.ndarray, np.ndarray]:
@@ -40,7 +36,7 @@ def unresolved_slopes(fits, xs, vs, ys, w, library: Library, solver, noise=None,
     n = xs.shape[0]
     est, out = np.zeros(n), np.zeros(n)
     terms = library.terms()
-    if not SLOPE_DISCREPANCY or (POSITION_DAMPING, 1) not in terms:
+    if (POSITION_DAMPING, 1) not in terms:
         return est, out
     j = terms.index((POSITION_DAMPING, 1))
     coef = np.asarray(fits.coef)

@@ -7,54 +7,11 @@ sines the joint regression's columns do too (`gain_segments`, `apply_gain`, `mat
 measured and the accelerations estimated from it, the filtered columns carry the noise of x that the target
 carries, differentiated: `cross_moment` gives its expected product with the target's noise, which the local
 fits take off their normal equations (`_fit/_errors_in_variables.shifted_qr`).
-
-The module's switches (`MATCHED`, `RAW_LINEAR`, `JOINT_GAIN`, `CROSS`) give the earlier behaviours back, each
-with the measurement that decided it.
 """
 
 import numpy as np
 
-#: the rows of a local fit on estimated accelerations pass through the differentiation filter's own
-#: gain (`filter_gain`, `band_rows`; False: the raw columns, as before)
-MATCHED = True
-#: ... the local stiffness's column q too (True: q raw, as at stop 40). G[q] carries the noise of x at every lag
-#: of the filter, correlated with the target's, which `cross_moment` takes off (`CROSS`): shallow arch, x only,
-#: 30 dB, `structured_noise`, local F' 24.80 and 14.91 through G without it for the truth's 24.32 and 14.44
-#: (12-15 standard errors), 24.31 and 14.43 with it. Raw, q misses the filter's shortfall at the well's
-#: frequency: single-tone arch, x only, 30 dB, seed 0, 2.68 % raw, 1.16 % through G; joint 10 Hz sine
-#: records, x only, 60 dB, seeds 0-3: 0.09/0.58/0.03/0.57 % raw, 0.018/0.017/0.14/0.009 % through G
-RAW_LINEAR = False
-
-
-#: the joint regression's columns through the gain as well where the accelerations were estimated from x
-#: (`gain_segments`; False: raw columns, as before). Not from v: single-tone arch, v only, 30 dB, seed 1,
-#: 2.25 % on raw columns, 17.2 % through G (seed 0 and 50 dB within 0.05 points)
-JOINT_GAIN = True
-
-
-def filter_gain(sig: np.ndarray, taps: np.ndarray, order: int, dt: float) -> np.ndarray:
-    """`sig` (N,) or (N, p) through the gain G(w) = H(w) / (i w)^order of the Savitzky-Golay taps of
-    a derivative of `order` (H their frequency response; G(0) = 1): what the differentiation did to the
-    derivative it estimated. On the mirror-extended record (no edge jump), by FFT, along axis 0."""
-    sig = np.asarray(sig, float)
-    n = sig.shape[0]
-    ext = np.concatenate([sig, sig[::-1]], axis=0)
-    w = 2.0 * np.pi * np.fft.rfftfreq(2 * n, dt)
-    half = taps.size // 2
-    lag = np.arange(-half, half + 1) * dt
-    if order == 2:
-        h = np.cos(np.outer(w, lag)) @ taps
-        gain = np.divide(h, -(w**2), out=np.ones_like(w), where=w > 0)
-    else:
-        h = np.sin(np.outer(w, lag)) @ taps
-        gain = np.divide(h, w, out=np.ones_like(w), where=w > 0)
-    spec = np.fft.rfft(ext, axis=0) * (gain if sig.ndim == 1 else gain[:, None])
-    return np.fft.irfft(spec, n=2 * n, axis=0)[:n]
-
-
-#: the local fits' normal equations lose the expected product of the columns' noise with the target's where
-#: both hold the noise of a measured x (accelerations estimated from it: `cross_moment`; False: as before)
-CROSS = True
+from .._recordings._derivatives import filter_gain
 
 
 def impulse_response(taps: np.ndarray, order: int, dt: float) -> np.ndarray:
@@ -93,7 +50,7 @@ def cross_moment(rec, i: int, q: np.ndarray, weights: np.ndarray, library, throu
     from ._noise import channel_variance
 
     how = (rec.derivation or {}).get("a")
-    if not CROSS or how is None or how["from"] != "x" or "x" in rec.derived:
+    if how is None or how["from"] != "x" or "x" in rec.derived:
         return None
     dt = rec.dt
     half = h.size // 2
@@ -122,7 +79,7 @@ def _taps(rec):
     from .._recordings._derivatives import savgol_taps
 
     how = (rec.derivation or {}).get("a")
-    if not MATCHED or how is None or how.get("order") not in (1, 2):
+    if how is None or how.get("order") not in (1, 2):
         return None
     windows = {w for w in how["windows"] if w}
     if len(windows) != 1:
@@ -140,23 +97,12 @@ def gain_segments(recs, groups) -> list[list[tuple]] | None:
         start, segs = 0, []
         for k in grp:
             n, tg = recs[k].n_samples, _taps(recs[k])
-            tg = tg if tg is not None and tg[1] == 2 else None  # from x (module's JOINT_GAIN)
+            tg = tg if tg is not None and tg[1] == 2 else None  # from x only
             segs.append(None if tg is None else (start, start + n, float(recs[k].dt), tg[0], tg[1]))
             any_gain |= tg is not None
             start += n
         out.append(segs)
     return out if any_gain else None
-
-
-def apply_gain(segs, a: np.ndarray) -> np.ndarray:
-    """`a` (samples, ...) of one well with each record's rows through its filter's gain (`filter_gain`;
-    `segs` one well's list from `gain_segments`), padding and records without one left as they are."""
-    out = np.array(a, float)
-    for seg in segs:
-        if seg is not None:
-            start, stop, dt, taps, order = seg
-            out[start:stop] = filter_gain(out[start:stop], taps, order, dt)
-    return out
 
 
 def _inputs(rec, i: int, masses, topology) -> np.ndarray:

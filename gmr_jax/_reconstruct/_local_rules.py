@@ -8,9 +8,6 @@ the host (NumPy bookkeeping around the jitted `fit_local`):
 - `_one_of_a_group`: a well whose damping terms the screen zeroed all at once keeps the best one of them;
 - `_extend_restoring`: the local restoring order raised while the next Taylor term is resolved;
 - `_share_velocity_damping`: one set of position-independent damping terms for every well (Eq. 21).
-
-The module switches (`SCORE_SHARED`, `EXEMPT_TRIED`, `ONE_OF_A_GROUP`) turn a rule back to the one before it,
-for the studies' before/after and the tests' teeth.
 """
 
 import equinox as eqx
@@ -147,12 +144,6 @@ def velocity_terms_not_shared(coef: np.ndarray, library: Library) -> np.ndarray:
     return _shared_law_terms(library) & np.any(nonzero, axis=0) & ~np.all(nonzero, axis=0)
 
 
-#: `_share_velocity_damping`'s candidates: their terms exempt from the threshold as the low orders are
-#: (`EXEMPT_TRIED`), each scored on what it leaves once the wells agree (`SCORE_SHARED`); module switches for
-#: the studies' before/after and the tests' teeth
-SCORE_SHARED = EXEMPT_TRIED = True
-
-
 def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_sigma, dof, failure, noise=None,
                             x_noise=None, band=None):
     """One set of position-independent damping terms for every well (Eq. 21). Where the wells'
@@ -184,7 +175,7 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
         term the screen zeroes without a refit leaves the others as they were beside it). `tried`: terms
         exempt from the threshold as the low orders are (the candidate set: the t-screen judges it)."""
         slv = eqx.tree_at(lambda s: s.threshold, solver, thr)
-        exempt = keep if tried is None or not EXEMPT_TRIED else kept | tried
+        exempt = keep if tried is None else kept | tried
         for _ in range(2):
             sol = fit_local(xs[k], vs[k], ys[k], library, slv, None, weights=w[k], keep=exempt,
                             support=jnp.asarray(support), noise=noise[k], x_noise=x_noise[k], band=band[k],
@@ -225,9 +216,7 @@ def _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_s
             for k in range(coef0.shape[0]):
                 support = with_constant((coef0[k] != 0) & ~vd, library) | cand | kept
                 new_fits = _set_well(new_fits, k, refit(k, support, fits.threshold[k], cand))
-            gone = []
-            if SCORE_SHARED:  # each candidate scored on what it leaves once the wells agree
-                new_fits, gone = shared(new_fits)
+            new_fits, gone = shared(new_fits)  # each candidate scored on what it leaves once the wells agree
             score = _summed_bic(new_fits)
             if np.isfinite(score) and (best is None or score < best[0]):
                 best = (score, new_fits, cand, gone)
@@ -266,10 +255,6 @@ def _refit_with(xs, vs, ys, w, library, solver, fits, k: int, support, j: int, n
     return sol, ok, float(np.asarray(sol.value.coef)[j]), float(np.asarray(sol.value.covariance)[j, j])
 
 
-#: `_refit_screened_damping` runs (a module switch, for the studies' before/after and the tests' teeth)
-REFIT_SCREENED_DAMPING = True
-
-
 def _refit_screened_damping(fits, screened, xs, vs, ys, w, library, solver, n_sigma, dof, failure, noise=None,
                             x_noise=None, band=None, rounds: int = 3):
     """A well where the t-screen zeroed some damping terms and kept others: the kept ones still hold the values
@@ -306,10 +291,6 @@ def _refit_screened_damping(fits, screened, xs, vs, ys, w, library, solver, n_si
     return screened
 
 
-#: `_one_of_a_group` runs (a module switch, for the studies' before/after and the tests' teeth)
-ONE_OF_A_GROUP = True
-
-
 def _one_of_a_group(fits, screened, xs, vs, ys, w, library, solver, n_sigma, dof, failure, noise=None, x_noise=None,
                     band=None):
     """A well whose damping terms the t-screen zeroed all at once, though its fit had some: collinear terms (on a
@@ -338,15 +319,6 @@ def _one_of_a_group(fits, screened, xs, vs, ys, w, library, solver, n_sigma, dof
     return screened
 
 
-#: estimated accelerations (`reconstruct` extends the restoring order up to the curvature there): each well takes
-#: F'' with its estimate and standard error whether or not it resolves it (the coordination weighs it by its
-#: covariance; a hard zero is a condition the data did not give). Magnet, x only, 0.45 % sweeps, 30 dB, seed 0
-#: (`studies/stress_cases.py`): F'' at 2.6 standard errors at one well, dropped; the even paper law gave way to an
-#: odd cubic 44.8 % off (the curvature oracle 20.8 %); with F'' the joint law 19.1 %. The other stress cases
-#: unchanged. A module switch, for the studies' before/after and the tests' teeth.
-FILL_CURVATURE = True
-
-
 def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failure, noise=None, x_noise=None,
                       upto: int | None = None, band=None, fill: bool = False):
     """Raise each well's local restoring order while the next Taylor term is significant.
@@ -359,7 +331,9 @@ def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failur
     error 2.75 % against the exact-Taylor oracle's 1.68 %. Each well is refitted on its support plus
     q^(r+1) (at its own threshold, the support kept); the term stays if the refit resolves it,
     and the next order is tried, up to q^`upto` (default: the library's restoring order). `fill`: each order up to
-    q^`upto` is added whatever its t (`FILL_CURVATURE`; the refit's other terms still screened at `n_sigma`).
+    q^`upto` is added whatever its t (the refit's other terms still screened at `n_sigma`): where the accelerations
+    were estimated, each well takes F'' with its estimate and standard error whether or not it resolves it (the
+    coordination weighs it by its covariance; a hard zero is a condition the data did not give).
     Returns the fits and, per well, the orders added."""
     idx = library.indices(STIFFNESS)  # q^0 .. q^r, in order
     added = [[] for _ in range(xs.shape[0])]
@@ -379,10 +353,6 @@ def _extend_restoring(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failur
             fits = _set_well(fits, k, new)
             added[k].append(top + 1)
     return fits, added
-
-
-#: `_dissipative_at_rest` runs (a module switch, for the studies' before/after and the tests' teeth)
-DISSIPATIVE_AT_REST = True
 
 
 def _dissipative_at_rest(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failure, noise=None, x_noise=None,
@@ -415,9 +385,7 @@ def _dissipative_at_rest(fits, xs, vs, ys, w, library, solver, n_sigma, dof, fai
     return fits, [int(k) for k in wells]
 
 
-#: `_extend_damping` runs (a module switch, for the studies' before/after and the tests' teeth)
-EXTEND_DAMPING = True
-#: ... and keeps a term only where it lowers the summed BIC by more than this ("very strong" evidence on Kass and
+#: `_extend_damping` keeps a term only where it lowers the summed BIC by more than this ("very strong" evidence on Kass and
 #: Raftery's scale). 10 Hz sines, x only, 30 dB, seed 3: v|v| beside the v^3 of both wells, resolved at each but
 #: 7.2 better only, a stand-in on one tone (2.49 v|v| + 8.59 v^3 for the truth's 10 v^3, the law 0.17 -> 0.19 %);
 #: the shallow arch's v|v| was 186 (30 dB) and 1677 (40 dB) better
@@ -461,10 +429,6 @@ def _extend_damping(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failure,
     if best[1] is None:
         return fits, []
     return best[1], [int(best[2])]
-
-
-#: `_extend_position_damping` runs (a module switch, for the studies' before/after and the tests' teeth)
-EXTEND_POSITION_DAMPING = True
 
 
 def _extend_position_damping(fits, xs, vs, ys, w, library, solver, n_sigma, dof, failure, noise=None, x_noise=None,

@@ -29,15 +29,13 @@ from .._fit._stls import STLS, compress, stls_qr
 from .._fit._threshold import default_thresholds, select_threshold
 from .._model._model import GlobalModel
 from .._model._predict import forces
-from .._recordings._derivatives import TONAL, band_edge, tonal_fraction
+from .._recordings._derivatives import TONAL, apply_gain, band_edge, tonal_fraction
 from .._recordings._inputs import as_recordings
-from .._recordings._recording import Recording, length_unit, validate
+from .._recordings._recording import Recording, length_unit, regression_targets, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import as_topology
 from . import (
     _design_law,
-    _filter_gain,
-    _local_rules,
     _noise,
     _resolution,
     _sanity,
@@ -57,7 +55,7 @@ from ._degree import (
     odd_gls,
     redundancy,
 )
-from ._filter_gain import apply_gain, gain_segments, matched_target
+from ._filter_gain import gain_segments, matched_target
 from ._local_rules import (
     _dissipative_at_rest,
     _extend_damping,
@@ -76,21 +74,8 @@ from ._slow import band_rows, curvature_only, edge_weights, restore_slow, segmen
 from ._truncation import with_truncation
 from ._velocity_noise import recorded_speed
 
-#: an x integrated from v or a hands the coordination each well's F, F', F'' only (`_slow.curvature_only`; a module
-#: switch, for the studies' before/after and the tests' teeth)
-INTEGRATED_CONDITIONS = True
-
 #: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
 DEFAULT_SOLVER = STLS(threshold=0.1, alpha=0.0, normalize_columns=True, unbias=True)
-
-
-def regression_targets(rec: Recording, masses: np.ndarray, topology) -> np.ndarray:
-    """Force carried by each DOF (N, D): input force minus inertia, the left side of Eq. (8).
-
-    Independent: force_i - m_i a_i. Chain: sum_{k>=i} (force_k - m_k a_k), i.e. H a with H of
-    Eq. (9) written for base-first numbering (`AbstractTopology.carried`)."""
-    _, f = rec.inputs()
-    return as_topology(topology).carried(f - rec.a * masses[None, :])
 
 
 def _resolve(recordings, masses, topology, min_recordings=2, what="fit", exclude_center=False):
@@ -127,8 +112,7 @@ def _resolve(recordings, masses, topology, min_recordings=2, what="fit", exclude
         forced = [r.name for r in recs if r.force is not None and np.any(np.asarray(r.force) != 0)]
         if not found and forced:
             # a force input does not scale out as a base input does: y = force - m a is wrong for every m but the
-            # true one (audit 8: a 0.1 kg oscillator driven by a shaker force, no mass given: damping 10x off,
-            # a degree-7 law, and the warnings blamed hops between wells)
+            # true one
             warnings.append(f"no masses given (none in the recordings, no masses=/--masses) and {forced[0]}"
                             f"{' and others are' if len(forced) > 1 else ' is'} driven by a force: each mass is taken "
                             f"as 1, and with a force input that is not a rescaling (the fit balances the force "
@@ -220,8 +204,7 @@ def _pad_stack(chunks: list[list[np.ndarray]]):
 def inner_samples(rec: Recording) -> np.ndarray:
     """(N,) 1 where the recording's estimated acceleration is a window's centre estimate, 0 on
     the first and last half-window (scipy's edge fit extrapolates there: ten times the noise,
-    correlated with x; 3000 samples, x only, 30 dB: with them the local stiffness 1.2 % low and
-    its scatter doubled). All 1 where the accelerations were measured."""
+    correlated with x). All 1 where the accelerations were measured."""
     out = np.ones(rec.n_samples)
     windows = [w for w in ((rec.derivation or {}).get("a") or {}).get("windows", []) if w]
     if windows:
@@ -305,8 +288,7 @@ def training_scores(model: GlobalModel, recs, masses, topology, rows=None) -> di
     DOF, the low-pass of the joint regression's rows where its accelerations were estimated
     (`_derived_rows`, None elsewhere); those DOFs also get "r2_in_band" (per DOF, None where no
     filter), the R² of both forces low-passed alike (the filter's ends left out), which the fit-quality
-    check reads: above the response's band the estimated force is differentiation noise (shallow arch,
-    x only, 30 dB: raw R² 0.15 and 0.06 on a model 1.34 % off)."""
+    check reads: above the response's band the estimated force is differentiation noise."""
     out = {}
     for r in recs:
         y = regression_targets(r, masses, topology)
@@ -344,18 +326,15 @@ JOINT_R2_SLACK = 0.25
 
 #: ... and the replacement is chosen among the joint's admissible candidates within this score (-2 log
 #: evidence) of the best by the tamest extrapolation (`JointSettings.tie`; 6: "strong" evidence on
-#: Kass and Raftery's scale decides, anything less does not). Single-tone arch, x, v, a at 50 dB, seed 0:
-#: v^3 beats v|v| by 2.4 on data at |v| <= 0.2, damps 5 x too hard at 3 and halves the hop rate.
+#: Kass and Raftery's scale decides, anything less does not)
 REPLACEMENT_TIE = 6.0
 
 
 def _replacement_settings(paper: Solution) -> JointSettings:
     """The joint regression that may replace a paper route of degree K: degrees up to the first
     odd one above K (room to confine; higher degrees fit the wells' data no better and wiggle
-    where no datum is: arch, x 50 dB, seed 1: degree 13, 6 % restoring error against 2 % at 7). That cap is a
-    choice against wiggles, not the data's limit: no truncation tail in its band (`JointSettings.truncation`;
-    arch, x v a, 0.45 % sweeps, 30 dB: degrees 3, 5, 7 converge at ratio 0.73 and the tail doubled a band of
-    +-16 % about a law 1.2 % off)."""
+    where no datum is). That cap is a choice against wiggles, not the data's limit: no truncation tail in its
+    band (`JointSettings.truncation`)."""
     k = int(np.asarray(paper.stats["K_r"]))
     return JointSettings(max_degree=min(max(k + 2 if k % 2 else k + 1, 3), JointSettings().max_degree),
                          tie=REPLACEMENT_TIE, truncation=False)
@@ -395,8 +374,7 @@ def _paper_route_faults(coord: Solution, fits: LocalFit, xs, vs, ys, w, speed: f
         if not r2 >= _sanity.MIN_R2:
             faults["data"].append(f"it explains the data of the well at x = {float(x0):.4g} poorly (R² {r2:.3g})")
     # an interpolant that blew up between the wells (rule 9 c) explains each well's own data, yet no
-    # datum supports it where it is used (bistable joint, 10 Hz sine records, x only, 60 dB, seeds 0-1:
-    # an 11th-degree law 1e6 % off, kept with a warning)
+    # datum supports it where it is used
     b = _sanity.blowup(g.stiffness, eq, np.asarray(fits.coef)[:, library.column(STIFFNESS, 1)])
     if b is not None:
         faults["blowup"].append(f"it blows up between the wells (|F| reaches {b['force']:.4g} at x = {b['x']:.4g}, "
@@ -410,9 +388,7 @@ def _paper_route_faults(coord: Solution, fits: LocalFit, xs, vs, ys, w, speed: f
 UNDETERMINED = 0.25
 def _undetermined(coord: Solution, fits: LocalFit) -> float:
     """Two standard errors of the paper route's restoring force over the wells' span (RMS; the coordination's
-    covariance, propagated from the local fits), relative to the force's RMS there; 0 where not finite. Single-tone
-    arch, x only, 30 dB, seed 0, `structured_noise`: F''/2 -51.7 (15) at one well for the truth's -23.85, 3.4
-    standard errors, gave the exact quintic 51.6 % off."""
+    covariance, propagated from the local fits), relative to the force's RMS there; 0 where not finite."""
     eq = np.asarray(fits.equilibrium, float)
     k = np.asarray(coord.value.stiffness, float)
     cov = np.asarray(coord.aux, float)[: k.size, : k.size]
@@ -449,8 +425,7 @@ def _derived_rows(recs, groups, i: int) -> RowFilter | None:
     were estimated: cut from the highest 99.5 % band edge of their x; None where the recordings'
     sampling steps differ (the padded rows are filtered sample by sample) or where a record is a
     steady sine (`tonal_fraction` >= `TONAL`): its nonlinearity speaks through the harmonics, above the
-    cut (bistable joint, 10 Hz sine records, x only, 45 and 30 dB seeds 1-2: 0.27-9.0 % unfiltered,
-    2.6-16.7 % filtered, degree 7 for 3)."""
+    cut."""
     members = [recs[k] for g in groups for k in g]
     dts = np.array([r.dt for r in members])
     if np.ptp(dts) > 1e-6 * dts.max():
@@ -501,8 +476,7 @@ def _joint(fits: LocalFit, xs, vs, ys, w, speed: float, restoring: Solution | No
         cov[nk:, nk:] = cov_j[settings.max_degree + 1 :, settings.max_degree + 1 :]
         # prior-data conflict (`_joint.CONFLICT`): the data reject every admissible damping law; the one they
         # prefer differs from the chosen one by a discrepancy of its form, not noise, which enters whole (as on
-        # the joint route, `_calibrated`). Bistable joint, 50 x^2 v, 30 dB, seed 2: C(0) 13.7 for the truth's 0,
-        # 10 standard errors off without it; the law the data prefer has C(0) = -1.3
+        # the joint route, `_calibrated`)
         free = np.asarray(stats.get("joint_unconstrained", []), float)[settings.max_degree + 1 :]
         if free.size == nj and float(stats.get("joint_conflict", 0.0)) > JOINT_CONFLICT:
             cov[nk:, nk:] += np.outer(free, free)
@@ -611,9 +585,7 @@ def _truncation_degree(coord: Solution, fits: LocalFit, xs, vs, ys, w, library: 
     if alt.result != RESULTS.successful or not np.all(np.isfinite(np.asarray(alt.value.flat()))):
         return coord, []
     alt.stats["max_degree_r"] = k
-    # the degree choice's discrepancy: the next odd degree's law less this one, in the band (`_calibrated`).
-    # Shallow arch (non-polynomial), 30 dB, seed 2: degree 5 for 6 (then the odd 7), 2.9 % off for 1.4 %; its
-    # band covered the truth on 65 % of the box, 75 % with the spread to the degree-6 law, 92.5 % with this
+    # the degree choice's discrepancy: the next odd degree's law less this one, in the band (`_calibrated`)
     other = odd_gls(fits, library, k + 2)
     other = coord if other is None else other
     alt.stats["truncation_alternative"] = (np.asarray(other.value.stiffness, float)
@@ -667,15 +639,10 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                 # motion): the joint regression replaces it where it explains every well as well.
                 # Redundant conditions confirm a law that turns outward (the NES truth does, and crosses zero again
                 # within the span checked), never an even degree: that comes from a term resolved at some wells
-                # only, or from local coefficients the truncated Taylor series biased (NES, orders 3, 3, seed 0:
-                # at 30 dB F''' at one well, t = 3.3, gave a degree-8 law 6 % off, "confirmed" by one redundant
-                # condition, now the joint law 1.34 %; at 40 dB 1.92 -> 1.36 %; at 60 dB 0.244 -> 0.288 %, the
-                # odd GLS of degree 9, its band covering the truth on 57 % of the box instead of 19 %)
+                # only, or from local coefficients the truncated Taylor series biased
                 even = degree(paper.value.stiffness) % 2 == 0
                 unconfirmed = bool(faults["restoring"]) and (redundancy(paper) == 0 or even)
-                # ... and only where the motions the model is used on reach the escape (the 5-cell
-                # Kresling tip cell's quintic turns outward far beyond its energy bound: the joint
-                # regression there cost 1.41 % -> 3.56 % restoring error for nothing)
+                # ... and only where the motions the model is used on reach the escape
                 reach = _sanity.reachable_escapes(paper.value.stiffness, fits.equilibrium, energy)
                 # An even degree (a term resolved at some wells only) gives way to the highest odd degree
                 # below it, fitted to all the local conditions, where that one is admissible and the
@@ -688,10 +655,9 @@ def _coordinate_dof(fits: LocalFit, xs, vs, ys, w, library: Library, coordinatio
                            "as many conditions as coefficients: it interpolates them")
                     why = why + [f"replaced by the odd degree-{int(odd.stats['K_r'])} law fitted to all the local "
                                  f"conditions (an even degree cannot confine; {fit})"]
-                # ... but an even degree cannot confine on both sides whatever the bound says (magnetic
-                # bistable, 30 dB, F'' resolved at one well only: an exact quartic kept for want of a
-                # reachable escape was 72 % off, the joint law 45 %; a paper law replaced by the odd degree
-                # above is no longer unconfirmed, so `even` is still that of the law this test judges)
+                # ... but an even degree cannot confine on both sides whatever the bound says (a paper law
+                # replaced by the odd degree above is no longer unconfirmed, so `even` is still that of the law
+                # this test judges)
                 if unconfirmed and not reach and not even:
                     why = why + ["kept: no motion within the model's energy bound "
                                  f"({energy:.3g}) reaches an escape"]
@@ -788,11 +754,9 @@ DESIGN_NARROWING = 3.0
 def _pool_laws(stiff: list, vdamp: list, pdamp: list, covs: list, reports: list, recs, noise=None) -> list[str]:
     """`_design_law.pool_design_laws` on every DOF's law and calibrated covariance, in place; the
     outcome per DOF goes to `reports[i].stats["shared_design"]["law"]`. Returns the warnings of the DOFs whose band
-    between the wells the pooling narrowed by more than `DESIGN_NARROWING` (audit, a 3-cell chain of tanh-law cells
-    10-20 % apart in their parameters, 60 dB: two cells' laws, 17 and 28 % off the truth, agreed with each other to
-    0.2 % (they err alike: one non-polynomial shape interpolated from the same Taylor orders), were pooled as one
-    design, and their bands fell from +-54 / 109 % to +-3.5 %, the truth inside on 16-30 % of the span; the pooling
-    cannot tell a shared error from a shared law)."""
+    between the wells the pooling narrowed by more than `DESIGN_NARROWING` (cells whose laws err alike, one
+    non-polynomial shape interpolated from the same Taylor orders, agree with each other: the pooling cannot tell a
+    shared error from a shared law)."""
     said = []
     sizes = [(a.size, b.size, c.size) for a, b, c in zip(stiff, vdamp, pdamp)]
     ok = [np.asarray(cv).shape == (sum(n),) * 2 for cv, n in zip(covs, sizes)]
@@ -871,148 +835,42 @@ def reconstruct(
     throw: bool = True,
     progress: Callable[[str], None] | None = None,
 ) -> Solution:
-    """Global model reconstruction, Algorithm 1, from small-vibration recordings.
+    """Global model reconstruction (Algorithm 1) from small-vibration recordings around each equilibrium.
+
+    At each well k of DOF i, the force the DOF carries, y = f - m a (Eq. 8), is regressed on the local library
+    Theta(x - x_k, v) (Eqs. 5-7); the wells' Taylor coefficients are then coordinated into one global law
+    (Eqs. 12-21), y = F(x) + C(x) v + sum_j B_j sgn(v)|v|^j. The cases behind each default are in
+    docs/explanation/reconstruction-defaults.md.
 
     **Arguments:**
 
-    - `recordings`: one per equilibrium (single DOF) or per configuration (chain): `Recording`s, file
-      paths (`load_recording`), or dicts or structured arrays of named signals (`{"t": t, "x": x,
-      "base_acc": b}`). Missing v/a are estimated from x (Savitzky-Golay).
-    - `library`: local library orders r, d (Eqs. 5-7).
-    - `solver`, `select`: STLS settings; `select=None` uses `solver.threshold` as given.
-    - `topology`: "chain" (default for several DOFs) or "independent".
-    - `masses`: per DOF; default from the recordings, else 1 (per unit mass).
-    - `screen_sigma`: before the coordination, a local coefficient smaller than `screen_sigma`
-      standard errors is set to zero (a t-test on each kept term): the Hermite solve takes every
-      local coefficient as exact, so an insignificant high-order term kept by the threshold
-      rule would otherwise raise the global degree and distort the model. None disables it.
-    - `well_tol`: recordings whose mean deformation of a cell differs by less than this
-      fraction of that cell's spread are taken as the same well of that cell and pooled.
-    - `keep_low_orders`: the local Taylor terms the coordination needs, the restoring law's
-      x^0 .. x^`keep_restoring_order` and the damping polynomial's v, x v, are exempt from the
-      STLS threshold (refitted on the STLS support plus these; the `screen_sigma` t-test
-      still decides whether each is kept). The CV threshold judges a term by its share of the
-      *local* force; a damping slope x v or a restoring x^3 is a tiny share of it at small
-      amplitude, yet fixes the global law between the wells. Kresling truss: the Hermite
-      interpolant from F, F', F'' at both wells is 1.3 % off (critical force 0.7 %), from
-      F to its third derivative 0.09 %; a dropped x^3 also biases the slope (RESULTS.md).
-    - `keep_restoring_order`: see `keep_low_orders`. Default (None): 3 when every recording
-      carries measured accelerations, 1 when they had to be estimated (from x or v): the
-      differentiation filter's gain error on the inertia then correlates with the amplitude and
-      a kept x^3 absorbs it (bistable joint at 1 degree from x alone: x^3 17 times too large).
-      A velocity estimated from x enters only the damping, which is small (3-cell Kresling
-      chain without its velocity channels, 30 dB: restoring error 3.9-14.5 % with the order
-      kept at 1, 2.9-3.4 % at 3, as with measured velocities 2.3-3.1 %). 2 where the accelerations
-      were differentiated once from a measured v (velocity only: x integrated from it, the slow
-      shift of its drift removal restored, `_slow`): shallow arch, v only, 0.45 %, noise-free to
-      45 dB: 14.6 % -> 7.2-9.1 % (the curvature oracle 2.6 %).
-    - `coordination`: "auto" (default), "gls" (covariance-weighted, lowest adequate degree),
-      "hermite" (the paper's exact interpolant; see `coordinate`), or "evidence": one
-      probabilistic model of every well's records (weak-form rows, a structured Gaussian prior
-      on the global law, hyperparameters and the restoring degree by evidence; the standard
-      errors and the band from its posterior covariance; `reconstruct_arrays`). On "evidence"
-      only `settings`, `masses`, `topology`, `throw` and `progress` apply.
-    - `settings`: a `ReconstructSettings` for `coordination="evidence"` (default: the
-      library's damping order, `well_tol`).
-    - `shared_damping`: the position-independent damping sgn(v)|v|^j (j != 1; j = 1 belongs
-      to the damping polynomial C(x) v) is one law shared by every well (Eq. 21). A term that
-      some wells' fits select and others do not is taken as a local artefact and dropped, and
-      the wells that had it are refitted without it (reported in `dofs[i].stats`). Typical
-      cause: an unselected x^2 v standing in as a cancelling v|v|, v^3, v^3|v| combination,
-      harmless inside the well, far off at deployment speeds (Kresling chain, 0.75 mm, seed 4:
-      base-cell damping error 8.3 % -> 0.19 %, basin agreement 60.7 % -> 94.6 %; RESULTS.md).
-    - `extend_restoring`: after the threshold rule, each well's local restoring order is raised
-      while the next Taylor term q^(r+1) is resolved (|t| >= `screen_sigma` in a refit on the
-      support plus that term; reported as `restoring_orders_added` in `dofs[i].stats`): a
-      resolved term left out biases the kept ones, and the coordination takes them as exact
-      (torque-free Kresling, deployed well: a dropped q^4 at t = 59 biased q^3 by 2 %). Default
-      (None): on when every recording carries measured accelerations (as
-      `keep_restoring_order`: with a estimated, a higher order absorbs the differentiation
-      filter's gain error); with a estimated and `structured_noise`, on up to q^2 only (the
-      curvature; at 60 dB x only the next order took the Savitzky-Golay bias for a q^3 and the
-      paper route's degree-7 law was 1650 % off), and there q^2 is kept whatever its t, with its
-      covariance (`_local_rules.FILL_CURVATURE`; magnet, x only, 30 dB: 44.8 -> 19.1 %).
+    - `recordings`: one per equilibrium (per configuration for a chain): `Recording`s, file paths
+      (`load_recording`) or dicts of named signals; missing v and a are estimated from x.
+    - `library`: local library orders r, d (Eqs. 5-7). `solver`, `select`: the STLS settings (`select=None`:
+      `solver.threshold` as given).
+    - `topology`: "chain" (default for several DOFs) or "independent". `masses`: per DOF (default: the recordings').
+    - `well_tol`: recordings whose mean deformation differs by less than this fraction of the cell's spread are one well.
+    - `screen_sigma`: local terms under this many standard errors are zeroed before the coordination (None: kept).
+    - `coordination`: "auto", "gls", "hermite" (the paper's exact interpolant) or "evidence" (one posterior over
+      every well's records, `reconstruct_arrays`; only `settings`, `masses`, `topology`, `throw`, `progress` apply).
+    - `settings`: a `ReconstructSettings` for `coordination="evidence"`.
+    - `keep_low_orders`, `keep_restoring_order`: x^0 .. x^order, v and x v are exempt from the STLS threshold (the
+      t-screen still judges them); the order defaults to 3 with measured accelerations, 2 differentiated from v, 1.
+    - `shared_damping`: one set of terms sgn(v)|v|^j (j != 1) for every well (Eq. 21).
+    - `extend_restoring`: raise each well's restoring order while the next term is resolved (default: with measured
+      accelerations; up to q^2, kept whatever its t, with estimated accelerations and `structured_noise`).
+    - `shared_design`: cells of one design lend their resolved orders as a prior (default: on unless "hermite").
+    - `structured_noise`: estimated accelerations' noise taken as it is (centre tap out, edges out, sandwich
+      covariances); default on for x integrated from v and for estimated accelerations on non-tonal records.
+    - `errors_in_variables`, `velocity_eiv`: correct for the white noise on a measured x (local fits) and on a
+      measured v (the joint regression's columns and covariance).
+    - `throw`: raise `GMRComputationError` on a numerical failure (else read `result`; NaN where it failed).
+    - `progress`: called with a short sentence at each stage, e.g. `print`.
 
-    - `shared_design`: with several DOFs, cells of one design (the same wells at the same
-      relative positions, Taylor ratios that agree across cells: `_shape_prior`) lend the
-      restoring orders their local fits resolve to the cells whose fits stop lower, as a prior
-      on those cells' own local regressions (value and slope stay their own; the prior's
-      spread, from the cells' measured differences, enters the covariance). Reported in
-      `dofs[i].stats["shared_design"]`. Default (None): on, except with `coordination="hermite"`
-      (the paper's method as published). 5-cell Kresling chains: RESULTS.md, issue 15.
-
-    - `structured_noise`: where accelerations are estimated (from x or v), take their noise for
-      what it is (results/derived_noise.md): x'' leaves each sample out of its own window
-      (`Recording.complete(exclude_center=True)`; otherwise the filter's centre weight
-      correlates the target's noise with the regressor x(t): shallow arch, x only, 30 dB, the
-      local stiffness 2.5-4 % high), the first and last half-window (the edge fit's
-      extrapolation) are left out of the fits (`inner_samples`), and the local covariances are
-      the sandwich with the noise's structure (the sensor noise through the differentiation
-      filter, from the channels' noise floors; `_fit/_target_noise.py`), not OLS, which takes
-      that noise as white and overstated the errors 2-25 times (F'' at 60 dB: se 12-24 % against
-      a scatter of 2-3 %). With it, each well's restoring series is also extended while the next
-      order is resolved, up to the curvature q^2 (`extend_restoring`). (The joint regression runs
-      on rows low-passed at 1.5 x the band edge wherever accelerations are estimated and no record is
-      a steady sine, with or without it: `_derived_rows`.) Default (None): on where every record's x
-      was integrated from a measured v (a laser vibrometer), and where accelerations are estimated and
-      no record is a steady sine (`tonal_fraction`); off otherwise. Velocity only, shallow arch, 0.45 %
-      sweeps, 45 dB, seeds 0-1: F''/2 from the rows without the slow band (`_slow.band_rows`) scatters
-      by 0.82/1.77 where OLS gives standard errors of 4.6/5.6, so the GLS took the cubic (14.6 % off);
-      with it 4.43/1.20 % (the curvature oracle 2.6 %). Shallow arch, x only, 0.45 % sweeps: 1.3-3.3 %
-      from noise-free to 30 dB (without it 14.5 % at 45-60 dB, the cubic); magnetic bistable, x only:
-      18.5-18.6 % at 60-45 dB (oracle 20.8 %; without it 45 %), at 30 dB 45 % either way
-      (results/derived_accelerations.md). It became the default on sweeps once the rows pass through
-      the differentiation filter's gain (`_filter_gain.filter_gain`) and the wells share their damping terms
-      by BIC (`_share_velocity_damping`): before, on notebook 06's displacement-only joint records (40
-      dB), the filter's gain on the third harmonic of the v^3 damping biased v^3 low and a linear v up
-      (2-5 OLS standard errors over seeds; a noise-free record: v 0.64 for 0, v^3 9.66 for 10), the
-      model kept spurious v and x v terms and `refine` made the holdout worse (5.49 -> 6.19 %). Now
-      0.040 % restoring and 0.13 % damping error there (the default before: 0.135 % and 4.64 %). On
-      steady sines (bistable joint, 10 Hz, x only; results/joint_sine_records.md) it is better at
-      45-30 dB, worse at 60 dB, and stays opt-in there.
-
-    - `errors_in_variables`: where x is measured with its accelerations (the noise of x and of
-      the target are independent), each local fit is corrected for the white noise on x (its
-      variance from the channel's spectral floor; the corrected score, `_fit/_errors_in_variables.py`):
-      least squares on a noisy q attenuates the slope and biases the higher powers, and the
-      coordination takes the local coefficients as exact. 2-cell cubic chain at 30 dB: local F'
-      4.1 standard errors low on average, restoring error of the stiff cell up to 10.6 % (a
-      degree-7 law for a cubic truth); corrected, F' within 0.1 standard errors and 0.06 %.
-      Reported per well in `dofs[i].stats["errors_in_variables"]`; False: plain least squares.
-    - `velocity_eiv`: the joint regression (route "joint", "gls + joint damping") corrects its
-      velocity columns for the white noise on a measured v (`_joint._velocity_noise`; not where v
-      is estimated, x integrated from v or a estimated from v), and its covariance for the
-      residual that noise leaves, largest where |v| is (`_joint._sandwich`, never narrower than
-      sigma^2 A^-1). Bistable joint (10 v^3), 5 degrees, 30 dB, 4 seeds: v^3 9.28-9.49 (7-10
-      standard errors low) -> 9.90-10.04 (within 1.7); the magnet's damping band at 40 dB holds the
-      truth on 100 % of its span instead of 60 % (`studies/velocity_noise.py`, `studies/coverage.py`).
-      A velocity term the score keeps is tested again on that covariance (`_joint._robust_velocity_set`).
-      On route "auto", the paper route's damping (local fits that take v as exact) gives way to the
-      corrected joint damping where the noise moves it by more than a standard error (`_velocity_noise.V_NOISE_DAMPING`).
-      Reported per well in `dofs[i].stats["velocity_noise"]`; False: the velocity columns taken
-      as measured.
-    - `throw`: raise `GMRComputationError` on a numerical failure (a local fit or the
-      coordination); with False, read `result` (the model then holds NaN where it failed).
-    - `progress`: called with a short sentence at each stage (per DOF: local fits,
-      coordination; then the checks), e.g. `print`; the command line prints them with times.
-
-    **Returns:** a `Solution` whose `value` is the `GlobalModel` (standard errors attached:
-    the local fits' noise propagated through the coordination; and `covariance`, the calibrated
-    covariance of each DOF's coefficients that `force_band` and `sample_models` use: that
-    propagated noise with the coordination's residual scale plus a model-discrepancy term for
-    what the local data do not fix between the wells, see `_coordination/_discrepancy.py`; on
-    the joint route its posterior covariance plus the degree choice's discrepancy),
-    `result` a `RESULTS` code, and `stats`: `method` ("GMR"), `library`, `dofs` (per-DOF
-    `DofReport`: equilibria, local coefficients and standard errors, thresholds, global orders,
-    condition numbers), `training` (R² and NRMSE per recording and DOF), `warnings` (plain-words
-    findings of the physical sanity checks, `_sanity`: clipped channels, a driven record
-    without its input, records that leave their well or are not small, poor training R²,
-    insignificant kept terms, a global law with spurious outer wells, an outward escape near
-    the data or a blow-up between the wells; each is also emitted as a `GMRDataWarning`).
-
-    User mistakes (no recordings, one equilibrium only, two recordings of one well, files
-    with different masses, inconsistent shapes) raise `GMRInputError` before anything is
-    computed.
+    **Returns:** a `Solution`: `value` the `GlobalModel` with standard errors and the calibrated `covariance`
+    (`force_band`, `sample_models`), `result` a `RESULTS` code, `stats` with `method`, `library`, `dofs` (a
+    `DofReport` per DOF), `training` (R², NRMSE) and `warnings` (the checks' findings, also `GMRDataWarning`s).
+    User mistakes raise `GMRInputError` before anything is computed.
     """
     recordings = as_recordings(recordings)  # paths and arrays as well as Recordings
     if coordination == "evidence":
@@ -1046,7 +904,7 @@ def reconstruct(
     for i in range(d):
         _, labels, groups = wells[i]
         xs, w = _pad_stack([[recs[k].x[:, i] for k in g] for g in groups])
-        if structured_noise or (_filter_gain.MATCHED and not measured):  # the edge fits' rows: not the taps' gain
+        if structured_noise or not measured:  # the edge fits' rows: not the taps' gain
             w = w * _pad_stack([[inner_samples(recs[k]) for k in g] for g in groups])[0]
         segs = segments(recs, groups, i)  # x integrated: each record's slow band (`_slow`)
         if segs is not None:  # the integration's ends left out
@@ -1064,13 +922,10 @@ def reconstruct(
         band = band_rows(recs, groups, i, w, targets, library, masses, topology, segs)
         # estimated accelerations: the joint regression's columns through the filter's gain, as the local fits'
         # (`_filter_gain.gain_segments`), where its rows are not low-passed (steady sines: the harmonics carry the
-        # nonlinearity, where G < 1). Single-tone arch, x only, 50/30 dB, seeds 0-1: 1.99/1.99/5.68/5.18 % on raw
-        # columns, 0.96/1.16/2.68/2.36 % through G (seed 1 at 50 dB hops 0.067 -> 0.95 times a second, the
-        # truth 0.967); joint 10 Hz sines, 45 dB: 0.27-0.29 -> 0.02-0.03 %. Low-passed rows keep the band where
-        # G is about 1, and G there only spreads the noise of x (arch, x only, sweeps, 60 dB, seeds 0-2: 1.34/
-        # 1.38/1.12 % raw, 2.55/2.06/1.67 % through G)
+        # nonlinearity, where G < 1); low-passed rows keep the band where G is about 1, and G there only spreads
+        # the noise of x
         row_filters.append(None if measured else _derived_rows(recs, groups, i))
-        gsegs = gain_segments(recs, groups) if _filter_gain.JOINT_GAIN and row_filters[i] is None else None
+        gsegs = gain_segments(recs, groups) if row_filters[i] is None else None
         gains.append(None if gsegs is None
                      else (gsegs, _pad_stack([[matched_target(recs[k], targets[k][:, i], i, masses, topology)
                                                for k in g] for g in groups])[0]))
@@ -1080,44 +935,41 @@ def reconstruct(
         eiv = _eiv_report(x_noise, xs, w, sols.stats.get("eiv_applied"))
         if screen_sigma is not None:
             screened = _screen(fits, screen_sigma, library)
-            if _local_rules.REFIT_SCREENED_DAMPING:  # wells that keep some damping terms (before the next rule)
-                screened = _refit_screened_damping(fits, screened, xs, vs, ys, w, library, solver, screen_sigma, i,
-                                                   failure, noise, x_noise, band)
-            if _local_rules.ONE_OF_A_GROUP:  # wells whose damping terms the screen zeroed all at once
-                screened = _one_of_a_group(fits, screened, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
-                                           noise, x_noise, band)
+            # wells that keep some damping terms (before the next rule)
+            screened = _refit_screened_damping(fits, screened, xs, vs, ys, w, library, solver, screen_sigma, i,
+                                               failure, noise, x_noise, band)
+            # wells whose damping terms the screen zeroed all at once
+            screened = _one_of_a_group(fits, screened, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
+                                       noise, x_noise, band)
             fits = screened
         codes = np.asarray(sols.result._value)
         for k in np.nonzero(codes != RESULTS.successful._value)[0]:
             failure.note(codes[k], f"DOF {i}, well {k}: local fit")
-        dropped, at_rest = [], []
-        if _local_rules.DISSIPATIVE_AT_REST:
-            fits, at_rest = _dissipative_at_rest(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
-                                                 noise, x_noise, band)
+        dropped = []
+        fits, at_rest = _dissipative_at_rest(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
+                                             noise, x_noise, band)
         if shared_damping:
             fits, dropped = _share_velocity_damping(fits, xs, vs, ys, w, library, solver, keep, screen_sigma, i,
                                                     failure, noise, x_noise, band)
-            if _local_rules.DISSIPATIVE_AT_REST:
-                fits, again = _dissipative_at_rest(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
-                                                   noise, x_noise, band, shared=True)
-                at_rest = sorted(set(at_rest) | set(again))
+            fits, again = _dissipative_at_rest(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
+                                               noise, x_noise, band, shared=True)
+            at_rest = sorted(set(at_rest) | set(again))
         damping_added = []
-        if _local_rules.EXTEND_DAMPING and screen_sigma is not None:
+        if screen_sigma is not None:
             fits, damping_added = _extend_damping(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure,
                                                   noise, x_noise, band)
         position_added = [[] for _ in groups]
-        if _local_rules.EXTEND_POSITION_DAMPING and screen_sigma is not None:
+        if screen_sigma is not None:
             fits, position_added = _extend_position_damping(fits, xs, vs, ys, w, library, solver, screen_sigma, i,
                                                             failure, noise, x_noise, band, fitted=fitted)
         added = [[] for _ in groups]
         if extend_restoring and screen_sigma is not None:
-            fill = extend_upto == 2 and _local_rules.FILL_CURVATURE  # F'' whatever its t (`FILL_CURVATURE`)
+            fill = extend_upto == 2  # F'' whatever its t
             fits, added = _extend_restoring(fits, xs, vs, ys, w, library, solver, screen_sigma, i, failure, noise,
                                             x_noise, extend_upto, band, fill=fill)
         local.append((labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band, at_rest, damping_added,
                       position_added))
-        # estimated accelerations: the joint regression on low-passed rows (`row_filter`; shallow arch, x only,
-        # 30 dB, 0.45 % sweeps, seeds 0-1: 8.31/8.81 % on raw rows, degree 13; 1.35/6.11 % filtered, degree 7)
+        # estimated accelerations: the joint regression on low-passed rows (`row_filter`)
         segs_all.append(segs)
         noises.append(noise)
         x_noises.append(x_noise)
@@ -1134,7 +986,7 @@ def reconstruct(
         labels, groups, xs, vs, ys, w, fits, dropped, added, eiv, band, at_rest, damping_added, position_added = local[i]
         data_fits = fits  # the local fits from the data alone (reported; the resolution report reads them)
         borrowed, design_why = [], None
-        integrated = segs_all[i] is not None and INTEGRATED_CONDITIONS  # F, F', F'' only (`_slow.curvature_only`)
+        integrated = segs_all[i] is not None  # F, F', F'' only (`_slow.curvature_only`)
         if plan[i] is not None:
             fits, borrowed = _borrow(fits, plan[i], xs, vs, ys, w, library, x_noises[i], band)
         fits = curvature_only(fits, library) if integrated else fits
@@ -1144,8 +996,7 @@ def reconstruct(
             x_noise=x_noises[i], rows=row_filters[i], band=band, segs=segs_all[i], gain=gains[i], v_noise=v_noises[i])
         if any(borrowed) and route == "joint":
             # the law with the borrowed orders was inadmissible and the joint regression (which sees
-            # only this cell's data) would replace it: the cell goes on alone (torque-free Kresling,
-            # 1 mm, seed 3, cell 4: an outward-turning nonic, then a joint law 86 % off)
+            # only this cell's data) would replace it: the cell goes on alone
             faults = [n for n in why if n not in coord.stats.get("degree_notes", [])]  # not the degree's notes
             design_why = "the borrowed orders gave an inadmissible law: " + "; ".join(faults[:1])
             fits, borrowed = (curvature_only(data_fits, library) if integrated else data_fits), []
@@ -1169,7 +1020,7 @@ def reconstruct(
         warnings += _sanity.check_scales(i, names, xcol, labels)
         well_names = [", ".join(names[k] for k in grp) for grp in groups]
         exempt = _under_top_order(coef, library) if screen_sigma is not None else None
-        if exempt is not None:  # orders `_extend_restoring` added are kept on purpose (`FILL_CURVATURE`: whatever t)
+        if exempt is not None:  # orders `_extend_restoring` added are kept on purpose (F'': whatever t)
             for k, orders in enumerate(added):
                 exempt[k, library.indices(STIFFNESS)[list(orders)]] = True
         warnings += _sanity.check_significance(i, well_names, library.names(), coef, local_se, exempt)
@@ -1197,7 +1048,6 @@ def reconstruct(
         g, cov_i = _calibrated(coord, fits, library, route, paper_sound, confining or any(borrowed))
         # a well that fixes the damping's value only: the slope it leaves open, in the band (`_damping_slopes`);
         # not where the joint regression fitted the damping to every well's data with its own position terms
-        # (magnet, 0.05 sweeps, 60 dB: the joint's constant C, band 0.056 % wide, would be 2.96 % wide)
         if "joint" not in route:
             slopes = unresolved_slopes(data_fits, xs, vs, ys, w, library, solver, noises[i], x_noises[i], band)
             cov_i = add_slope_vectors(cov_i, *(np.asarray(a).shape[0] for a in (g.stiffness, g.velocity_damping,
@@ -1366,8 +1216,8 @@ def gmc_sindy(
 
 
 def _baseline_faults(model: GlobalModel, recs) -> list[str]:
-    """GMC-SINDy's model held to GMR's admissibility (audit: a baseline damping law that feeds energy in between the
-    wells, or a restoring force with wells the data do not have, came without a word): per DOF with two or more
+    """GMC-SINDy's model held to GMR's admissibility (a baseline damping law that feeds energy in between the
+    wells, or a restoring force with wells the data do not have): per DOF with two or more
     wells (recordings grouped as `reconstruct` groups them), `restoring_faults` over the wells' span widened by half
     of it, and `damping_faults` there up to the speed of a fall from anywhere in that span to the lowest well."""
     out = []

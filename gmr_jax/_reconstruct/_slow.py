@@ -10,23 +10,19 @@ s(t) with
 (the band below f_hp carries no inertia, no input and, for an oscillation symmetric in v, no
 damping), a shift that follows the vibration's amplitude (a sweep: it changes over the record).
 Without s, the local fit sees k2 q^2's slow part with no force to balance it and takes k2 too
-small: shallow arch, velocity only, 0.45 % of the interwell distance, noise-free, F''/2 -17.6 and
-13.6 where the truth has -23.85 and 23.72, and the global law 26 % off.
+small.
 
 `restore_slow` fits the local law in the band above f_hp only (the target and every regressor
 high-passed by the same cosine-transform filter as the drift removal: the equation holds in any
 band, and the missing s barely touches that band), then adds s = -lowpass(k2 q^2) / k1 to x
 where the band-limited fit resolves k2 (|t| >= `MIN_T`). The cubic is fitted, so that it does not
 bias k2, but left out of s: the missing s enters the band above f_hp through 2 k2 q s, which a
-cubic absorbs (k3 - 4 k2^2 / (3 k1) on a sine: the arch's -1.06 fitted as -78).
+cubic absorbs (k3 - 4 k2^2 / (3 k1) on a sine).
 
 The restored s holds only the k2 q^2 part of the slow band, so `reconstruct` also fits without that
 band: every local regression of such a DOF (`band_rows`: the library columns and the target lose
 their content between 0 and the cut-off, the mean kept) and the joint regression's rows (`segments`,
 `apply_band`). The slow band then only sets the mean (the static balance at the given equilibrium).
-Shallow arch, velocity only, 0.45 %, noise-free: local F''/2 -26.6 and 22.1 (30 and 12 standard errors
-off) -> -23.85 and 23.74, restoring error 6.95 -> 2.11 % (the curvature oracle 2.61 %; true x with the
-same estimated accelerations 1.93 %).
 """
 
 from dataclasses import replace
@@ -37,7 +33,6 @@ import numpy as np
 from .._fit._library import STIFFNESS
 from .._recordings._integrate import remove_drift
 from .._recordings._recording import Recording
-from . import _filter_gain
 from ._filter_gain import _taps, cross_moment, filter_gain, matched_target
 
 #: the curvature enters the restored shift only where the band-limited fit resolves it
@@ -153,15 +148,6 @@ def edge_weights(recs, groups) -> list[np.ndarray]:
     return out
 
 
-def apply_band(segs, a: np.ndarray) -> np.ndarray:
-    """`a` (samples, ...) of one well with each record's slow band removed (`remove_drift` with the mean
-    kept), padding left as it is."""
-    out = np.array(a, float)
-    for start, stop, dt, cut in segs:
-        out[start:stop] = remove_drift(out[start:stop], dt, cut, keep_mean=True)
-    return out
-
-
 def band_rows(recs, groups, i: int, w: np.ndarray, targets, library, masses, topology, segs):
     """Per well of DOF `i`, the `BandRows` of its local regression: the library columns at the well's
     centre (the `w`-weighted mean of x, as `fit_local` takes it) and the target `targets[k][:, i]`,
@@ -170,23 +156,17 @@ def band_rows(recs, groups, i: int, w: np.ndarray, targets, library, masses, top
 
     Estimated accelerations (one Savitzky-Golay window for every DOF of a record, `_taps`): the
     target holds G[x''], G the filter's gain (`filter_gain`), so the columns pass through G too
-    (q's as well unless `RAW_LINEAR`) and the target's measured inputs (base acceleration, forces) as
+    (q's as well) and the target's measured inputs (base acceleration, forces) as
     well; where x was measured, each well's `BandRows.cross` holds the noise its columns share with the
-    target (`cross_moment`), which `fit_local` takes off the normal equations. On the raw columns the gain's shortfall on the harmonics of a nonlinear term
-    reads as other terms: bistable joint, x only, noise-free 0.5 degree sweep, a [1, q, q^2, q^3, v,
-    v^3] fit gives q^3 28000 for 1755, v 0.64 for 0 and v^3 9.66 for 10; through G 2236, 0.002 and
-    9.999 (the rest from the estimated v); with the true v exact.
+    target (`cross_moment`), which `fit_local` takes off the normal equations. On the raw columns the gain's
+    shortfall on the harmonics of a nonlinear term reads as other terms.
 
     Integrated x: the columns and the target lose their record's slow band (between 0 and the drift
     cut-off, the mean kept: `remove_drift(..., keep_mean=True)`). The integration removed that band
     from x, and `restore_slow` puts back only its k2 q^2 part; a regression on all rows takes the
-    curvature from it (q^2's slow part follows the envelope of a sweep): shallow arch, velocity only,
-    0.45 % of the interwell distance, noise-free, local F''/2 -26.6 and 22.1 (30 and 12 standard
-    errors off) against the truth's -23.85 and 23.72; without the slow band -23.85 and 23.74 (within
-    1 standard error)."""
+    curvature from it (q^2's slow part follows the envelope of a sweep)."""
     import jax.numpy as jnp
 
-    from .._fit._library import STIFFNESS
     from .._fit._local_fit import BandRows
     from .._topology import as_topology
 
@@ -195,10 +175,8 @@ def band_rows(recs, groups, i: int, w: np.ndarray, targets, library, masses, top
         return None
     from ._noise import _response
 
-    k1 = library.column(STIFFNESS, 1)
     topo, masses = as_topology(topology), np.asarray(masses, float)
     through = np.ones(library.n_terms, bool)
-    through[k1] = not _filter_gain.RAW_LINEAR
     resp = float(_response(topo, masses, recs[groups[0][0]].n_dof, i)[0][i])
     out = []
     for g, grp in enumerate(groups):
@@ -215,10 +193,7 @@ def band_rows(recs, groups, i: int, w: np.ndarray, targets, library, masses, top
             yk = np.asarray(targets[k][:, i], float)
             if gains[g][m] is not None:  # the columns through the target's filter, the inputs too
                 taps, order = gains[g][m]
-                raw = th
                 th = filter_gain(th, taps, order, r.dt)
-                if _filter_gain.RAW_LINEAR:
-                    th[:, k1] = raw[:, k1]
                 yk = matched_target(r, yk, i, masses, topo, gains[g][m])
                 c = None if order != 2 else cross_moment(r, i, r.x[:, i] - centre, wg[start:start + r.n_samples],
                                                          library, through, resp, taps)
@@ -243,9 +218,7 @@ def curvature_only(fits, library):
     well's F, F', F''. What the restored shift misses of x's slow band enters the band above the cut-off through
     2 k2 q s, which the local cubic absorbs (module docstring): a bias of up to 4 k2^2 / (3 k1) times the missed
     share, systematic, which the local standard errors do not carry. The terms stay in the local fits (left out
-    there, they would bias F' and F''). Hand-made Duffing (-x + x^3, 0.1 v), v only at 20 Hz, rest positions given:
-    local F'''/6 0.897 and 1.095 (70 and 35 standard errors off), the exact septic through them 1.29 % off with its
-    band 8 x too narrow; through F, F', F'' the quintic, 0.12 %."""
+    there, they would bias F' and F'')."""
     high = np.array([phys == STIFFNESS and k > INTEGRATED_MAX_ORDER for phys, k in library.terms()])
     if not np.any(np.asarray(fits.coef)[:, high] != 0):
         return fits

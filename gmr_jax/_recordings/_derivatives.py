@@ -50,12 +50,8 @@ def _power(x: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
     return np.fft.rfftfreq(x.size, dt), p
 
 
-#: the band edge counts the power above the white noise floor (`band_edge`; False: all the power, as before) ...
-ABOVE_FLOOR = True
-#: ... where the noise holds more than this share of the power the edge leaves out (1 - fraction, 0.5 %): from about
-#: 26 dB down. Above, the edge is as before (the shallow arch, x only, 30 dB, 0.45 %: the floor's 1 % shift of the
-#: edge moved one record's window from 13 to 15 samples, and seeds 0-3 went 1.3/6.3/4.7/8.0 % -> 7.9/5.3/4.5/9.3 %:
-#: the window's luck, not a gain)
+#: the band edge counts the power above the white noise floor (`band_edge`) where the noise holds more than this
+#: share of the power the edge leaves out (1 - fraction, 0.5 %): from about 26 dB down; above, all the power
 NOISE_SHARE = 0.5
 
 
@@ -63,12 +59,10 @@ def band_edge(x: np.ndarray, dt: float, fraction: float = 0.995) -> float:
     """Frequency below which `fraction` of the power of x (mean removed) above its white noise floor
     lies, in Hz. The floor, the mean level of the top fifth of the band (its periodogram's median / ln 2,
     robust to lines), is taken off every bin where the noise holds more than `NOISE_SHARE` of 1 - `fraction`
-    of the power: white noise holding more than 1 - `fraction` otherwise sets the edge inside the noise (a
-    Duffing well sampled at 20 Hz, x only: 0.37 Hz clean, 3.7 Hz at 20 dB, and the Savitzky-Golay window fell
-    from 17 samples to 7, a 60 % restoring error; with the floor off, 0.36-0.40 Hz from 60 dB to 15 dB, 0.1-0.2 %
-    error)."""
+    of the power: white noise holding more than 1 - `fraction` otherwise sets the edge inside the noise, and
+    the Savitzky-Golay window with it."""
     freqs, p = _power(x, dt)
-    if ABOVE_FLOOR and freqs.size >= 10:
+    if freqs.size >= 10:
         floor = float(np.median(p[freqs >= 0.8 * freqs[-1]])) / np.log(2.0)  # white noise's periodogram: exponential
         above = p - floor
         if floor * p.size > NOISE_SHARE * (1.0 - fraction) * np.sum(p) and np.sum(above) > 0:
@@ -162,6 +156,37 @@ def savgol_taps(window: int, polyorder: int, order: int, dt: float, exclude_cent
     taps = np.zeros(window)
     taps[keep] = np.linalg.pinv(vander)[order] * math.factorial(order) / dt**order
     return taps
+
+
+def filter_gain(sig: np.ndarray, taps: np.ndarray, order: int, dt: float) -> np.ndarray:
+    """`sig` (N,) or (N, p) through the gain G(w) = H(w) / (i w)^order of the Savitzky-Golay taps of
+    a derivative of `order` (H their frequency response; G(0) = 1): what the differentiation did to the
+    derivative it estimated. On the mirror-extended record (no edge jump), by FFT, along axis 0."""
+    sig = np.asarray(sig, float)
+    n = sig.shape[0]
+    ext = np.concatenate([sig, sig[::-1]], axis=0)
+    w = 2.0 * np.pi * np.fft.rfftfreq(2 * n, dt)
+    half = taps.size // 2
+    lag = np.arange(-half, half + 1) * dt
+    if order == 2:
+        h = np.cos(np.outer(w, lag)) @ taps
+        gain = np.divide(h, -(w**2), out=np.ones_like(w), where=w > 0)
+    else:
+        h = np.sin(np.outer(w, lag)) @ taps
+        gain = np.divide(h, w, out=np.ones_like(w), where=w > 0)
+    spec = np.fft.rfft(ext, axis=0) * (gain if sig.ndim == 1 else gain[:, None])
+    return np.fft.irfft(spec, n=2 * n, axis=0)[:n]
+
+
+def apply_gain(segs, a: np.ndarray) -> np.ndarray:
+    """`a` (samples, ...) of one well with each record's rows through its filter's gain (`filter_gain`;
+    `segs` one well's list of (start, stop, dt, taps, order), as `_reconstruct/_filter_gain.gain_segments` gives it), padding and records without one left as they are."""
+    out = np.array(a, float)
+    for seg in segs:
+        if seg is not None:
+            start, stop, dt, taps, order = seg
+            out[start:stop] = filter_gain(out[start:stop], taps, order, dt)
+    return out
 
 
 def differentiate(

@@ -32,11 +32,6 @@ from ._derivatives import FLOOR_RATIO, floor_spectrum
 
 #: the drift cut-off as a fraction of the measured signal's low edge
 HP_FRACTION = 0.8
-#: integrate by the interpolating cubic spline's antiderivative (error O(dt^4)), not the cumulative trapezoid,
-#: whose gain at frequency f is 1 - (2 pi f dt)^2 / 12: a few 1e-4 at 20-100 samples a period, enough to bias a
-#: local cubic by its share of the force (hand-made Duffing, v only, 20 Hz, 90 samples a period: the viscous term
-#: 0.5 % low, the restoring law 0.18 % off on 1.5 x the wells' span; with the spline 0.008 % and 0.053 %)
-SPLINE = True
 
 
 def low_edge(s: np.ndarray, dt: float, ratio: float = FLOOR_RATIO) -> float:
@@ -82,16 +77,27 @@ def detrend(y: np.ndarray, degree: int) -> np.ndarray:
 
 def integrate(s: np.ndarray, dt: float, f_hp: float, times: int = 1) -> np.ndarray:
     """The drift-free `times`-fold integral of s (N,) (module docstring): integrate `times`
-    times (`SPLINE`), remove the least-squares polynomial of degree `times` (the unknown initial
-    values and what a sensor's bias integrates to), then the content below `f_hp`."""
+    times by the interpolating cubic spline's antiderivative (error O(dt^4); the cumulative trapezoid's gain
+    at frequency f, 1 - (2 pi f dt)^2 / 12, biases a local cubic by its share of the force), remove the
+    least-squares polynomial of degree `times` (the unknown initial values and what a sensor's bias integrates
+    to), then the content below `f_hp`."""
     from scipy.interpolate import CubicSpline
 
     y = np.asarray(s, float)
     t = dt * np.arange(y.shape[0])
-    for _ in range(times):  # the antiderivative of the interpolating cubic spline (`SPLINE`)
-        y = (CubicSpline(t, y).antiderivative()(t) if SPLINE
-             else np.concatenate([[0.0], np.cumsum(0.5 * dt * (y[1:] + y[:-1]))]))  # cumulative trapezoid
+    for _ in range(times):
+        y = CubicSpline(t, y).antiderivative()(t)
     return remove_drift(detrend(y, times), dt, f_hp)
+
+
+def apply_band(segs, a: np.ndarray) -> np.ndarray:
+    """`a` (samples, ...) of one well with each record's slow band removed (`remove_drift` with the mean
+    kept), padding left as it is; `segs`: one well's (start, stop, dt, cut-off) per record, as
+    `_reconstruct/_slow.segments` gives them."""
+    out = np.array(a, float)
+    for start, stop, dt, cut in segs:
+        out[start:stop] = remove_drift(out[start:stop], dt, cut, keep_mean=True)
+    return out
 
 
 def integrated_signals(t, v, a, base_acc, src: str):

@@ -792,6 +792,15 @@ def load_recording(path, columns: dict | None = None) -> Recording:
     return validate(rec, src)
 
 
+def regression_targets(rec: Recording, masses: np.ndarray, topology) -> np.ndarray:
+    """Force carried by each DOF (N, D): input force minus inertia, the left side of Eq. (8).
+
+    Independent: force_i - m_i a_i. Chain: sum_{k>=i} (force_k - m_k a_k), i.e. H a with H of
+    Eq. (9) written for base-first numbering (`AbstractTopology.carried`)."""
+    _, f = rec.inputs()
+    return as_topology(topology).carried(f - rec.a * masses[None, :])
+
+
 def length_unit(recs) -> tuple[str | None, str | None]:
     """The unit of the recordings' lengths where their files' headers named one (`Recording.length_unit`), and a
     warning where some named none. Recordings in different units are refused: one fit takes every file's numbers

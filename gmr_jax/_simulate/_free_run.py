@@ -3,7 +3,7 @@
 
 The run starts from the recorded state at `sim_start` (half a Savitzky-Golay window in when v
 was estimated from x), the input is low-passed at 3x its band edge where it carries white noise
-and interpolated by a cubic spline (`_discover.smooth_input`, `sampled_spline`), sgn(v) terms are smoothed to
+and interpolated by a cubic spline (`_inputs.smooth_input`, `sampled_spline`), sgn(v) terms are smoothed to
 tanh(v / eps) with eps = 1e-3 rms(v), and the step budget grows with the record: the same
 simulation `discover` reports as output error. An x integrated from v or a is compared after the
 same drift removal (`_offset.comparable`), its unobservable equilibrium placed by the model.
@@ -20,8 +20,9 @@ from .._errors import GMRDataWarning, GMRInputError
 from .._model._model import AbstractMechanicalModel
 from .._recordings._recording import Recording, load_recording, validate
 from .._solution import RESULTS, Solution, as_result, code_name, message, raise_if_failed
-from ._inputs import sampled_spline
+from ._inputs import sampled_spline, smooth_input
 from ._integrate import Integrator
+from ._offset import comparable, place
 from ._simulate import simulate
 
 #: a displacement farther than this many recorded spans from the recorded mean is divergence
@@ -64,6 +65,21 @@ class FreeRun:
         return self.x - self.x_measured
 
 
+#: the free run's integrator: tolerances and the step budget of a record up to 20 000 samples
+SIM = Integrator(rtol=1e-7, atol=1e-10, max_steps=400_000)
+
+
+def sim_start(rec: Recording) -> int:
+    """First sample of the output-error simulation: half a Savitzky-Golay window in, where an
+    estimated v is an interior (not extrapolated) estimate; 0 when v was recorded."""
+    if "v" not in rec.derived:
+        return 0
+    from .._recordings._derivatives import auto_window
+
+    w = max(auto_window(rec.x[:, i], rec.dt) for i in range(rec.n_dof))
+    return int(min(w // 2 + 1, rec.n_samples // 10))
+
+
 def free_run(model: AbstractMechanicalModel, recording, *, columns: dict | None = None,
              integrator: Integrator | None = None, throw: bool = True) -> Solution:
     """Simulate `model` under `recording`'s measured input and compare with its displacement.
@@ -80,9 +96,6 @@ def free_run(model: AbstractMechanicalModel, recording, *, columns: dict | None 
     `diverged` (x left the box of 100 recorded spans around the recorded mean, or turned
     non-finite) or the solver's failure code; `stats["message"]` says it in words.
     """
-    from .._discover._discover import SIM, sim_start, smooth_input
-    from .._discover._offset import comparable, place
-
     if not isinstance(model, AbstractMechanicalModel):
         raise GMRInputError(f"free_run: model must be a mechanical model, got {type(model).__name__}")
     rec = recording if isinstance(recording, Recording) else load_recording(recording, columns)

@@ -4,7 +4,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from .._model._predict import forces
-from .._reconstruct._reconstruct import regression_targets
+from .._recordings._recording import regression_targets
 from .._reconstruct._slow import restore_slow
 from .._recordings._integrate import remove_drift
 

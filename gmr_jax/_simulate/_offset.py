@@ -1,7 +1,7 @@
 """The unobservable equilibrium of a velocity- or acceleration-only recording, placed by the model.
 
 x integrated from v or a has zero mean (`_recordings._integrate`): where the structure sat while
-it vibrated is not in the data. Unless the recording gives it (`equilibrium`), `discover` places
+it vibrated is not in the data. Unless the recording gives it (`equilibrium`), `discover` and `free_run` place
 it with the model under test: per DOF, the offset c that makes the model's force balance hold on
 average over the record,
 
@@ -22,8 +22,8 @@ from numpy.polynomial import polynomial as P
 from math import comb
 
 from .._errors import GMRInputError
-from .._reconstruct._reconstruct import regression_targets
 from .._recordings._integrate import detrend, remove_drift
+from .._recordings._recording import regression_targets
 
 
 def _balance(model, dof: int, x: np.ndarray, v: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -96,12 +96,3 @@ def comparable(rec, z: np.ndarray) -> np.ndarray:
     cut = max(info["f_highpass_hz"])
     cols = [remove_drift(detrend(z[:, k], times), rec.dt, cut) + z[:, k].mean() for k in range(z.shape[1])]
     return np.stack(cols, 1)
-
-
-def preload_entry(dof: int, rec_names: list) -> dict:
-    """The not-separable entry of `preload` on a DOF whose equilibrium offset was unobservable."""
-    return {"dof": dof, "physics": "preload", "term": "1", "with": "the equilibrium offset of x",
-            "correlation": 1.0, "r2": 1.0, "vif": None,
-            "reason": (f"x was integrated from velocity or acceleration ({', '.join(rec_names)}), so its static "
-                       f"offset is unobservable and was placed by the model; a constant force trades exactly "
-                       f"against that offset: not a finding (give 'equilibrium' to make it observable)")}
