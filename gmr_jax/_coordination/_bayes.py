@@ -170,8 +170,11 @@ def prior_sd(h: Hyper, basis: Basis):
 def _gaussian(sq, Gs, bs, fit0, logdet_noise, n):
     """Posterior and log evidence of z ~ N(0, diag(sq^2)) under rows with precision-weighted
     Gram Gs = Phi' B Phi, moment bs = Phi' B y, y' B y = fit0, sum log det B = logdet_noise and n
-    rows; in whitened form A = I + D G D (D = diag(sq)), mean = D A^-1 D b."""
-    A = jnp.eye(sq.shape[0]) + sq[:, None] * Gs * sq[None, :]
+    rows; in whitened form A = I + D G D (D = diag(sq)), mean = D A^-1 D b. The diagonal of D G D
+    is raised by `JITTER` of itself: where the data fix a direction 1e15 times better than the
+    prior, rounding in the factorisation would otherwise exceed the identity."""
+    M = sq[:, None] * Gs * sq[None, :]
+    A = jnp.eye(sq.shape[0]) + M + JITTER * jnp.diag(jnp.diagonal(M))
     chol = jnp.linalg.cholesky(A)
     z = jax.scipy.linalg.cho_solve((chol, True), sq * bs)
     logdet = 2.0 * jnp.sum(jnp.log(jnp.diag(chol)))
@@ -204,6 +207,13 @@ HYPER_SD = (10.0, 15.0)
 
 #: BFGS tolerance on the hyperparameters and on the evidence per row
 TOL = 1e-6
+
+#: largest gradient of the evidence per row (per unit of a log or logit hyperparameter) at which an
+#: optimum that ran out of BFGS steps is accepted
+FLAT = 1e-4
+
+#: relative increase of the whitened data precision's diagonal before its Cholesky factorisation
+JITTER = 1e-10
 
 
 def log_hyperprior(h: Hyper):
@@ -242,8 +252,8 @@ _ADJOINT = optx.ImplicitAdjoint(linear_solver=lx.AutoLinearSolver(well_posed=Fal
 
 def _minimise(loss, starts, args, max_steps: int):
     """The better of BFGS runs from `starts`, and a `RESULTS` code: successful where BFGS stopped
-    by its tolerances or where the gradient there is below `TOL` (BFGS can wander along a
-    direction the loss does not depend on without meeting its step tolerance)."""
+    by its tolerances or where the gradient there is below `FLAT` (BFGS can wander along a
+    direction the loss barely depends on without meeting its step tolerance)."""
     solver = optx.BFGS(rtol=TOL, atol=TOL)
     sols = [optx.minimise(loss, solver, y0, args=args, max_steps=max_steps, throw=False, adjoint=_ADJOINT)
             for y0 in starts]
@@ -254,7 +264,7 @@ def _minimise(loss, starts, args, max_steps: int):
     for k, sl in enumerate(sols[1:], start=1):
         code = RESULTS.where(best == k, RESULTS.promote(sl.result), code)
     grad = jax.grad(loss)(jax.lax.stop_gradient(y), jax.lax.stop_gradient(args))
-    flat = jnp.max(jnp.abs(jnp.concatenate([jnp.ravel(g) for g in jax.tree_util.tree_leaves(grad)]))) < TOL
+    flat = jnp.max(jnp.abs(jnp.concatenate([jnp.ravel(g) for g in jax.tree_util.tree_leaves(grad)]))) < FLAT
     return y, RESULTS.where(flat, RESULTS.successful, code)
 
 
