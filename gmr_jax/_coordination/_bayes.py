@@ -333,11 +333,12 @@ def chebyshev_shift(a, b, degree: int):
 
 class Design(eqx.Module):
     """Hyperparameters of one design's shared law: log scale and logit decay of its Chebyshev
-    coefficients, and each member's log spread about it."""
+    coefficients, each member's log spread about it and its wells' log noise variances."""
 
     log_scale: Float[Array, ""]
     logit_decay: Float[Array, ""]
     log_spread: Float[Array, " members"]
+    log_noise: Float[Array, "members wells"]
 
 
 def _design_matrices(maps, damping: int):
@@ -353,9 +354,9 @@ def _design_matrices(maps, damping: int):
     return E
 
 
-def _design_solve(d: Design, stats, maps, damping_sd, log_noise, basis: Basis):
+def _design_solve(d: Design, stats, maps, damping_sd, basis: Basis):
     G, b, yy, n = stats  # (J, W, P, P), (J, W, P), (J, W), (J, W)
-    beta = jnp.exp(-log_noise)
+    beta = jnp.exp(-d.log_noise)
     E = _design_matrices(maps, damping_sd.shape[1])
     Gs = jnp.einsum("jpz,jw,jwpq,jqy->zy", E, beta, G, E)
     bs = jnp.einsum("jpz,jw,jwp->z", E, beta, b)
@@ -380,9 +381,9 @@ def design_posterior(stats, maps, damping_sd, log_noise, basis: Basis, *, max_st
         theta_j = [A_j (g + d_j); e_j],   g ~ N(0, s^2 rho^(2 p_k)),   d_j ~ N(0, t_j^2 rho^(2 p_k)),
 
     (p_k the restoring decay powers of `basis`, e_j the damping coefficients with the prior
-    `damping_sd` and the noise `log_noise` of the member's own fit). The scale s, decay rho and
-    spreads t_j maximise the evidence of all members' rows times the hyperprior: a member whose
-    rows disagree with the others' law gets a large t_j and keeps its own law.
+    `damping_sd` of the member's own fit). The scale s, decay rho, spreads t_j and the wells'
+    noise variances (from `log_noise`) maximise the evidence of all members' rows times the
+    hyperprior: a member whose rows disagree with the others' law gets a large t_j.
 
     **Arguments:**
 
@@ -390,18 +391,18 @@ def design_posterior(stats, maps, damping_sd, log_noise, basis: Basis, *, max_st
     - `maps`: (J, K + 1, K + 1) A_j, the design's normalised Chebyshev coefficients to member
       j's scaled restoring coefficients.
     - `damping_sd`: (J, P - K - 1) the damping columns' prior standard deviations.
-    - `log_noise`: (J, W) the wells' log noise variances.
+    - `log_noise`: (J, W) the wells' log noise variances of the members' own fits (the start).
 
     **Returns:** a `Solution` whose value is `(mean (J, P), covariance (J, P, P), Design)`."""
 
     def loss(d, args):
-        ev = _design_solve(d, args, maps, damping_sd, log_noise, basis)[4]
+        ev = _design_solve(d, args, maps, damping_sd, basis)[4]
         return -(ev + _log_design_prior(d)) / jnp.maximum(jnp.sum(args[3]), 1.0)
 
     j = maps.shape[0]
-    starts = [Design(jnp.zeros(()), jnp.asarray(-1.0), jnp.full(j, t)) for t in (-6.0, 0.0)]
+    starts = [Design(jnp.zeros(()), jnp.asarray(-1.0), jnp.full(j, t), log_noise) for t in (-6.0, 0.0)]
     d, code = _minimise(loss, starts, stats, max_steps)  # two starts: the members one design, or each its own
-    E, mean, chol, sq, _ = _design_solve(d, stats, maps, damping_sd, log_noise, basis)
+    E, mean, chol, sq, _ = _design_solve(d, stats, maps, damping_sd, basis)
     inv = jax.scipy.linalg.cho_solve((chol, True), jnp.eye(sq.shape[0]))
     cz = sq[:, None] * inv * sq[None, :]
     means = jnp.einsum("jpz,z->jp", E, mean)

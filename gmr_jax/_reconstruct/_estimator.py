@@ -137,11 +137,14 @@ def _fit(x, v, p, s, mask, well, n_wells, settings, width, dt):
 
 @eqx.filter_jit
 def _design(stats, geometry, wells, slope, hyper, basis):
-    """The members' posterior under one shared law: the design coordinate puts each member's
-    outer wells at -1 and 1, and its law is normalised by its slope there (F'(w_0) l)."""
+    """The members' posterior under one shared law: the design coordinate u = (x - m_j) / (k l_j)
+    puts each member's outer wells at -1/k and 1/k (m_j their midpoint, l_j half their distance),
+    k the smallest factor that brings every member's records into [-1, 1]; each law is normalised
+    by its slope at its first well (F'(w_0) l_j)."""
     centre, half, _, scale = geometry
     mid, l = 0.5 * (wells[:, 0] + wells[:, 1]), 0.5 * (wells[:, 1] - wells[:, 0])
-    shift = jax.vmap(lambda a, b: _bayes.chebyshev_shift(a, b, basis.degree))(half / l, (centre - mid) / l)
+    k = jnp.max((half + jnp.abs(centre - mid)) / l)
+    shift = jax.vmap(lambda a, b: _bayes.chebyshev_shift(a, b, basis.degree))(half / (k * l), (centre - mid) / (k * l))
     maps = (slope * l / scale)[:, None, None] * shift
     last = jax.tree_util.tree_map(lambda a: a[:, -1], hyper)  # each member's hyperparameters at the top degree
     damping_sd = jax.vmap(lambda h: _bayes.prior_sd(h, basis))(last)[:, basis.degree + 1:]
