@@ -1,6 +1,6 @@
 """Accuracy metrics of a reconstructed model against a truth model (paper Sec. 2.3, Eq. 22).
 
-On a `Graph` the metrics read one element's law: `dof` is the element index, x its deformation.
+On a `Graph` the metrics read one element's law: `dof` is the element index, x its deformation."""
 
 from typing import NamedTuple
 
