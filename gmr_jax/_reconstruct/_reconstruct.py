@@ -33,7 +33,7 @@ from .._recordings._derivatives import TONAL, band_edge, tonal_fraction
 from .._recordings._inputs import as_recordings
 from .._recordings._recording import Recording, length_unit, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
-from .._topology import as_topology
+from .._topology import Graph, as_topology
 from . import (
     _design_law,
     _filter_gain,
@@ -868,6 +868,7 @@ def reconstruct(
     structured_noise: bool | None = None,
     errors_in_variables: bool = True,
     velocity_eiv: bool = True,
+    designs=None,
     throw: bool = True,
     progress: Callable[[str], None] | None = None,
 ) -> Solution:
@@ -880,7 +881,11 @@ def reconstruct(
       "base_acc": b}`). Missing v/a are estimated from x (Savitzky-Golay).
     - `library`: local library orders r, d (Eqs. 5-7).
     - `solver`, `select`: STLS settings; `select=None` uses `solver.threshold` as given.
-    - `topology`: "chain" (default for several DOFs) or "independent".
+    - `topology`: "chain" (default for several DOFs), "independent", or a `Graph` (x: the node
+      displacements; fitted on the "evidence" route only: every element's law jointly from every
+      node's weak-form balance, each node summing the incidence-signed columns of its elements).
+    - `designs`: on a `Graph`, one integer label per element; elements with one label are one
+      design and share one law (their data pooled). Default: every element its own law.
     - `masses`: per DOF; default from the recordings, else 1 (per unit mass).
     - `screen_sigma`: before the coordination, a local coefficient smaller than `screen_sigma`
       standard errors is set to zero (a t-test on each kept term): the Hermite solve takes every
@@ -1015,6 +1020,8 @@ def reconstruct(
     computed.
     """
     recordings = as_recordings(recordings)  # paths and arrays as well as Recordings
+    if isinstance(topology, Graph):
+        return _graph(recordings, topology, designs, coordination, settings, library, masses, throw, progress)
     if coordination == "evidence":
         return _evidence(recordings, settings, library, masses, topology, well_tol, throw, progress)
     given = dict(locals())  # the call's arguments, for rule 14d's refit (`_window_check`)
@@ -1266,6 +1273,29 @@ def reconstruct(
     _emit(warnings)
     sol = _solution(model, failure, "GMR", library, reports, training, warnings, recs)
     sol.stats["resolution"] = resolution
+    return sol
+
+
+def _graph(recordings, graph, designs, coordination, settings, library, masses, throw, progress) -> Solution:
+    """`reconstruct` on a `Graph` (`_graph`)."""
+    from ._estimator import ReconstructSettings
+    from ._graph import reconstruct_graph
+
+    if coordination not in ("auto", "evidence"):
+        raise GMRInputError(f"a graph is fitted on the 'evidence' route only (its elements' laws are identified "
+                            f"jointly from the nodes' balances), got coordination={coordination!r}; use "
+                            f"coordination='evidence'")
+    if settings is None:
+        settings = ReconstructSettings(damping_order=library.damping_order)
+    relieve_map_pressure()
+    say = progress or (lambda msg: None)
+    recs, masses, _, warnings = _resolve(recordings, masses, "independent", min_recordings=1)
+    sol = reconstruct_graph(recs, masses, graph, designs, settings, say)
+    sol.stats["warnings"] = warnings + sol.stats["warnings"]
+    sol.stats["settings"] = settings
+    _emit(sol.stats["warnings"])
+    if throw and sol.result != RESULTS.successful:
+        _Failure("reconstruct", True).note(sol.result, "graph: evidence maximisation")
     return sol
 
 
