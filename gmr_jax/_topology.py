@@ -130,6 +130,16 @@ class Graph(AbstractTopology):
 
     - `nodes`: number of nodes D (the model's masses, one per node).
     - `elements`: E pairs (a, b) of node indices in -1..D-1, a != b.
+
+    Examples:
+        Two masses on the ground in series, and a spring from the ground to the second (a loop):
+
+        >>> import gmr_jax as gmr
+        >>> graph = gmr.Graph(2, [[-1, 0], [0, 1], [-1, 1]])
+        >>> graph.n_elements, graph.incidence.tolist()
+        (3, [[1.0, 0.0], [-1.0, 1.0], [0.0, 1.0]])
+        >>> gmr.Graph.chain(3).elements
+        ((-1, 0), (0, 1), (1, 2))
     """
 
     name: ClassVar[str] = "graph"
