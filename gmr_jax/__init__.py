@@ -22,7 +22,12 @@ from ._config import (
 from ._errors import GMRInputError as GMRInputError
 from ._reconstruct._sanity import GMRDataWarning as GMRDataWarning, unit_checks as unit_checks
 from ._solution import GMRComputationError as GMRComputationError, RESULTS as RESULTS, Solution as Solution
-from ._topology import AbstractTopology as AbstractTopology, Chain as Chain, Independent as Independent
+from ._topology import (
+    AbstractTopology as AbstractTopology,
+    Chain as Chain,
+    Graph as Graph,
+    Independent as Independent,
+)
 
 # recordings
 from ._recordings._derivatives import differentiate as differentiate
@@ -50,11 +55,17 @@ from ._coordination._joint import (
 )
 
 # the global model (Eq. 1)
-from ._model._io import load_model as load_model, save_model as save_model
+from ._model._io import (
+    load_graph as load_graph,
+    load_model as load_model,
+    save_graph as save_graph,
+    save_model as save_model,
+)
 from ._model._model import (
     AbstractMechanicalModel as AbstractMechanicalModel,
     GlobalModel as GlobalModel,
     from_terms as from_terms,
+    to_graph as to_graph,
 )
 from ._model._predict import forces as forces, predict as predict
 from ._model._uncertainty import ForceBand as ForceBand, force_band as force_band, sample_models as sample_models

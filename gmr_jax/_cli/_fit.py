@@ -58,9 +58,14 @@ def register(sub):
                    help="highest order of the local damping terms (sgn(v)|v|^j and x^j v)")
     f.add_argument("--threshold", default="auto", help="STLS threshold on normalised coefficients, or 'auto' "
                    "(blocked cross-validation, one-standard-error rule; default)")
-    f.add_argument("--topology", choices=["chain", "independent"], default=None,
-                   help="several DOFs: chain (cells in series, x_i the deformation of cell i; the default) or "
-                   "independent (each DOF its own mass on the ground)")
+    f.add_argument("--topology", default=None, metavar="chain|independent|GRAPH.json",
+                   help="several DOFs: chain (cells in series, x_i the deformation of cell i; the default), "
+                   "independent (each DOF its own mass on the ground), or a graph file {\"nodes\": D, \"masses\": "
+                   "[...], \"elements\": [[a, b], ...]} (x: node displacements; every element's law from every "
+                   "node's balance, on the evidence route; masses from the file unless --masses)")
+    f.add_argument("--designs", default=None, metavar="L0,L1,...",
+                   help="graph only: one integer label per element; elements with one label share one law (their "
+                   "data pooled; default: every element its own law)")
     f.add_argument("--masses", default=None, help="comma-separated masses (default: from recordings, else 1)")
     f.add_argument("--no-velocity-damping", action="store_true",
                    help="leave out the terms sgn(v)|v|^j (friction, drag) from the library")
@@ -76,6 +81,26 @@ def register(sub):
                    "its warnings are still written); without it warnings are printed and the status is 0")
     f.set_defaults(fn=run)
     return f
+
+
+def graph_option(args, kwargs: dict):
+    """`--topology`: a name, or a graph file (its masses and `--designs` go into `kwargs`)."""
+    import gmr_jax as gmr
+
+    if args.topology in (None, "chain", "independent"):
+        if args.designs is not None:
+            raise GMRInputError("--designs labels the elements of a graph; give --topology GRAPH.json")
+        return args.topology
+    if not Path(args.topology).suffix.lower() == ".json":
+        raise GMRInputError(f"--topology must be chain, independent or a graph .json file, got {args.topology!r}")
+    graph, kwargs["graph_masses"] = gmr.load_graph(args.topology)
+    if args.designs is not None:
+        try:
+            kwargs["designs"] = np.array([int(v) for v in args.designs.split(",")])
+        except ValueError:
+            raise GMRInputError(f"--designs must be comma-separated integers, one per element, got "
+                                f"{args.designs!r}") from None
+    return graph
 
 
 def figure_path(out: str, figure: str | None) -> Path:
@@ -116,7 +141,15 @@ def run(args) -> int:
         except ValueError:
             raise GMRInputError(f"--masses must be comma-separated numbers, got {args.masses!r}") from None
     fn = gmr.gmc_sindy if args.method == "gmc-sindy" else gmr.reconstruct
-    if args.method == "gmr":
+    topology = graph_option(args, kwargs)
+    if isinstance(topology, gmr.Graph):
+        if args.method != "gmr":
+            raise GMRInputError("a graph is fitted by --method gmr (its elements' laws jointly, evidence route)")
+        masses = kwargs.pop("graph_masses") if masses is None else masses
+        kwargs = {"designs": kwargs.get("designs"), "settings": gmr.ReconstructSettings(
+            damping_order=args.damping_order), "coordination": "evidence"}
+        png = None  # the fit figure draws chains and independent DOFs
+    if args.method == "gmr" and not isinstance(topology, gmr.Graph):
         kwargs["coordination"] = args.coordination
         if args.no_shared_design:
             kwargs["shared_design"] = False
@@ -130,7 +163,7 @@ def run(args) -> int:
     stage(f"{args.method}: local fits and coordination (the first run of a shape compiles)")
     with warnings.catch_warnings():  # printed below as `warning:` lines, once each
         warnings.simplefilter("ignore", GMRDataWarning)
-        sol = fn(recs, lib, topology=args.topology, masses=masses, **kwargs)
+        sol = fn(recs, lib, topology=topology, masses=masses, **kwargs)
     model, st = sol.value, sol.stats
     stage(f"writing {args.out}")
     # the file: what save_model(solution) writes (the fitted region from the completed recordings: an
@@ -171,15 +204,20 @@ def summary_lines(model, st, recs, out, unit, ranges, masses_given=False) -> lis
              + (f" (lengths in {unit}, forces in the recordings' units)" if unit else "")]
     lines += ["  " + e for e in model.equations(precision=4)]
     eqs = equilibria(model.stiffness)
-    for i in range(model.n_dof):
+    graph = model.topology.name == "graph"
+    what = "element" if graph else "DOF"
+    for i in range(model.n_elements):
         stable = [x for x, s in eqs[i] if s > 0]
         saddles = [x for x, s in eqs[i] if s < 0]
         band = "" if model.covariance is None else (
             f"; restoring-force band ±{100 * restoring_uncertainty(model.stiffness[i], model.covariance[i], *ranges[i]):.2g} %")
-        lines.append(f"  DOF {i}: stable wells at x = {', '.join(f'{x:.4g}' for x in stable) or 'none'}{lu}"
+        lines.append(f"  {what} {i}: stable wells at x = {', '.join(f'{x:.4g}' for x in stable) or 'none'}{lu}"
                      + (f", saddle{'s' if len(saddles) > 1 else ''} at {', '.join(f'{x:.4g}' for x in saddles)}{lu}"
                         if saddles else "") + band)
-    if model.n_dof > 1:
+    if graph:
+        lines.append(f"  topology: graph of {model.n_dof} nodes and {model.n_elements} elements (x: an element's "
+                     f"deformation, the displacement of its second node minus its first's)")
+    elif model.n_dof > 1:
         lines.append(f"  topology: {model.topology.name}" + (" (x_i: cell i's deformation; --topology independent for "
                      "separate masses)" if model.topology.name == "chain" else " (--topology chain for cells in series)"))
     tr = st.get("training") or {}

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, term_name
+from .._model._model import term_key
 
 #: keys `show` prints in their own sections; any other key is listed at the end.
 _KNOWN = ("format", "topology", "masses", "terms", "method", "library", "training", "warnings", "data_range",
@@ -190,9 +191,10 @@ def _term_table(model, d: dict, p: int) -> list[str]:
     has_se = any("stderr" in t for t in d["terms"])
     eqs = model.equations(precision=p)
     order = {STIFFNESS: 0, VELOCITY_DAMPING: 1, POSITION_DAMPING: 2}
-    for i in range(model.n_dof):
+    key = term_key(model.topology)
+    for i in range(model.n_elements):
         lines.append("  " + eqs[i])
-        terms = sorted((t for t in d["terms"] if t["dof"] == i and t["coefficient"] != 0),
+        terms = sorted((t for t in d["terms"] if t[key] == i and t["coefficient"] != 0),
                        key=lambda t: (order.get(t["physics"], 3), t["order"]))
         if not terms:
             continue
@@ -233,10 +235,12 @@ def describe(path, precision: int = 4, detail: bool = False) -> str:
 
 
 def _describe(model, d: dict, name: str, p: int, detail: bool = False) -> str:
-    n = model.n_dof
+    n = model.n_elements
+    lab = term_key(model.topology).replace("dof", "DOF")
     masses = [_g(m, p) for m in np.asarray(model.masses)]
-    out = [f"{name}: {d['format']}, {n} DOF{'s' if n > 1 else ''}, topology {model.topology.name}, "
-           f"masses [{', '.join(masses)}]"]
+    shape = (f"graph of {model.n_dof} nodes and {n} elements {[list(e) for e in model.topology.elements]}"
+             if lab == "element" else f"{n} DOF{'s' if n > 1 else ''}, topology {model.topology.name}")
+    out = [f"{name}: {d['format']}, {shape}, masses [{', '.join(masses)}]"]
     method = d.get("method")
     lib = d.get("library")
     if method or lib:
@@ -249,7 +253,7 @@ def _describe(model, d: dict, name: str, p: int, detail: bool = False) -> str:
         out.append(f"lengths in {units['length']} (from the recordings' headers: the coefficients, wells, ranges and "
                    f"barriers are in {units['length']} and s)")
 
-    out += ["", "Equations (force of each DOF, model units):"] + _term_table(model, d, p)
+    out += ["", f"Equations (force of each {lab}, model units):"] + _term_table(model, d, p)
 
     rng = d.get("data_range")
     rng = None if rng is None else np.asarray(rng, float).reshape(n, 2)
@@ -257,24 +261,24 @@ def _describe(model, d: dict, name: str, p: int, detail: bool = False) -> str:
     out += ["", "Equilibria at rest (F_i(x) = 0; stable where dF/dx > 0):"]
     for i in range(n):
         if not eqs[i]:
-            out.append(f"  DOF {i}: none (no real zero of the restoring polynomial)")
+            out.append(f"  {lab} {i}: none (no real zero of the restoring polynomial)")
             continue
         for k, (x, s) in enumerate(eqs[i]):
             kind = "stable  " if s > 0 else ("saddle  " if s < 0 else "marginal")
             where = "" if _inside(x, None if rng is None else rng[i]) else "  (outside the training data range)"
-            out.append(f"  {'DOF ' + str(i) + ':' if k == 0 else '':7s} x = {_g(x, p):>11s}  {kind}  "
+            out.append(f"  {lab + ' ' + str(i) + ':' if k == 0 else '':7s} x = {_g(x, p):>11s}  {kind}  "
                        f"dF/dx = {_g(s, p)}{where}")
     n_stable = [sum(s > 0 for _, s in e) for e in eqs]
-    out.append(f"  stable wells per DOF: {n_stable}")
+    out.append(f"  stable wells per {lab}: {n_stable}")
 
     bars = barriers(model.stiffness, eqs)
     out += ["", "Energy barriers between neighbouring wells (V(saddle) - V(well), V = integral of F dx):"]
     if not any(bars):
-        out.append("  none (no DOF has two stable wells with a saddle between them)")
+        out.append(f"  none (no {lab} has two stable wells with a saddle between them)")
     spread = barrier_intervals(model, bars) if any(bars) else None
     for i, rows in enumerate(bars):
         for k, b in enumerate(rows):
-            out.append(f"  DOF {i}: wells {_g(b['left'], p)} | {_g(b['right'], p)} over the saddle at "
+            out.append(f"  {lab} {i}: wells {_g(b['left'], p)} | {_g(b['right'], p)} over the saddle at "
                        f"{_g(b['saddle'], p)}: {_g(b['from_left'], p)} from the left well, "
                        f"{_g(b['from_right'], p)} from the right")
             if spread is not None:
@@ -284,12 +288,12 @@ def _describe(model, d: dict, name: str, p: int, detail: bool = False) -> str:
 
     out += ["", "Training:"]
     if rng is not None:
-        out.append("  data range of x: " + ", ".join(f"DOF {i} [{_g(a, p)}, {_g(b, p)}]"
+        out.append("  data range of x: " + ", ".join(f"{lab} {i} [{_g(a, p)}, {_g(b, p)}]"
                                                     for i, (a, b) in enumerate(rng)))
     vr = d.get("speed_range")
     if vr is not None:
         out.append("  data range of v (the speeds the damping law was fitted at; beyond them it is extrapolated): "
-                   + ", ".join(f"DOF {i} [{_g(a, p)}, {_g(b, p)}]"
+                   + ", ".join(f"{lab} {i} [{_g(a, p)}, {_g(b, p)}]"
                                for i, (a, b) in enumerate(np.asarray(vr, float).reshape(n, 2))))
     tr = d.get("training")
     if isinstance(tr, dict) and tr:

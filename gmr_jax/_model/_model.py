@@ -13,7 +13,7 @@ from jaxtyping import Array, Float
 
 from .._errors import GMRInputError, as_whole_number, describe
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING, signed_power, term_name
-from .._topology import AbstractTopology, Independent, as_topology
+from .._topology import AbstractTopology, Graph, Independent, as_topology
 
 
 def polyval(coef: Float[Array, " orders"], x):
@@ -31,13 +31,17 @@ class AbstractMechanicalModel(eqx.Module):
     chain (cells numbered from the base), (H a)_i + F_i(x_i, v_i) = sum_{k>=i} force_k with
     (H a)_i = sum_{k>=i} m_k a_k (paper Eq. 9 for base-first numbering). a is the absolute
     acceleration: a_i = x_0'' + ... + x_i'' + base_acc for a chain, x_i'' + base_acc otherwise.
+    Graph (`Graph`): x are node displacements, the laws act on element deformations
+    delta = B x, and m a = force - B^T F(delta, delta').
     """
 
     masses: eqx.AbstractVar[Float[Array, " dof"]]
     topology: eqx.AbstractVar[AbstractTopology]
 
-    def force(self, x: Float[Array, " dof"], v: Float[Array, " dof"]) -> Float[Array, " dof"]:
-        return self.restoring(x) + self.damping(x, v)
+    def force(self, x: Float[Array, " dof"], v: Float[Array, " dof"]) -> Float[Array, " elements"]:
+        """Restoring plus damping force of every element at coordinates x, velocities v."""
+        e, ev = self.topology.deformations(x), self.topology.deformations(v)
+        return self.restoring(e) + self.damping(e, ev)
 
     @abc.abstractmethod
     def restoring(self, x: Float[Array, " dof"]) -> Float[Array, " dof"]:
@@ -50,6 +54,11 @@ class AbstractMechanicalModel(eqx.Module):
     @property
     def n_dof(self) -> int:
         return int(np.shape(self.masses)[0])
+
+    @property
+    def n_elements(self) -> int:
+        """Number of force laws: the graph's elements, else one per DOF."""
+        return self.topology.n_elements if isinstance(self.topology, Graph) else self.n_dof
 
     def accelerations(self, x, v, base_acc, force) -> Float[Array, " dof"]:
         """Relative accelerations x'' of every DOF, given base acceleration and forces."""
@@ -66,7 +75,8 @@ class GlobalModel(AbstractMechanicalModel):
 
     **Attributes:**
 
-    - `masses` (dof,); `topology`: `Chain()` or `Independent()` (or their names).
+    - `masses` (dof,); `topology`: `Chain()`, `Independent()` (or their names) or a `Graph`,
+      whose coefficient rows are its elements (x then the element's deformation).
     - `stiffness` (dof, orders): K_ik, coefficient of x^k (`stiffness` order k).
     - `velocity_damping` (dof, orders): B_ij of sgn(v)|v|^j.
     - `position_damping` (dof, orders): C_ij of x^j v.
@@ -112,10 +122,11 @@ class GlobalModel(AbstractMechanicalModel):
         ):
             a = np.asarray(arr)
             se = None if self.stderr is None or self.stderr.get(name) is None else np.asarray(self.stderr[name])
+            key = term_key(self.topology)
             for i in range(a.shape[0]):
                 for k in range(a.shape[1]):
                     if a[i, k] != 0.0 and abs(a[i, k]) > tol:
-                        t = {"dof": i, "physics": name, "order": k, "coefficient": float(a[i, k])}
+                        t = {key: i, "physics": name, "order": k, "coefficient": float(a[i, k])}
                         if se is not None and np.isfinite(se[i, k]):
                             t["stderr"] = float(se[i, k])
                         out.append(t)
@@ -124,10 +135,11 @@ class GlobalModel(AbstractMechanicalModel):
     def equations(self, precision: int = 4, x: str = "x", v: str = "v") -> list[str]:
         """One readable line per DOF: `F_0(x, v) = -2244 x + 1755 x^3 + 10 v^3`."""
         lines = []
-        for i in range(self.n_dof):
+        key = term_key(self.topology)
+        for i in range(self.n_elements):
             parts = []
             for t in self.terms():
-                if t["dof"] != i:
+                if t[key] != i:
                     continue
                 name = term_name(t["physics"], t["order"], x, v)
                 c = t["coefficient"]
@@ -142,6 +154,12 @@ class GlobalModel(AbstractMechanicalModel):
 
 
 KNOWN_PHYSICS = (STIFFNESS, VELOCITY_DAMPING, POSITION_DAMPING)
+
+
+def term_key(topology) -> str:
+    """The key that names a term's law: "element" on a graph, "dof" otherwise."""
+    return "element" if isinstance(topology, Graph) else "dof"
+
 TERM_KEYS = ("dof", "physics", "order", "coefficient", "stderr")
 _TERM_FIX = ('a term is {"dof": i, "physics": "stiffness" | "velocity_damping" | "position_damping", '
              '"order": k, "coefficient": c} (optional "stderr": s)')
@@ -173,12 +191,17 @@ def check_masses(masses, source: str = "from_terms") -> np.ndarray:
 MAX_ORDER = 64
 
 
-def check_terms(terms, n_dof: int, source: str = "from_terms", duplicates: str = "error") -> list[dict]:
+def check_terms(terms, n_dof: int, source: str = "from_terms", duplicates: str = "error",
+                key: str = "dof") -> list[dict]:
     """Validate "gmr-model/1" term dicts for a model of `n_dof` DOFs; return normalised copies
     (int dof and order, float coefficient and stderr). Raises `GMRInputError` naming the term,
     the key and the fix: unknown or missing keys, a non-integer dof or order, a coefficient that
     is not a finite number, a duplicated (dof, physics, order) unless `duplicates="add"`, a DOF
-    without any term."""
+    without any term. `key="element"`: the terms of a graph's `n_dof` elements."""
+    if key != "dof":
+        with _element_words():
+            return _renamed(check_terms(_renamed(terms, key, "dof", source), n_dof, source, duplicates), "dof", key,
+                            source)
     if duplicates not in ("error", "add"):
         raise GMRInputError(f"{source}: duplicates must be 'error' or 'add', got {describe(duplicates)}")
     if not isinstance(terms, (list, tuple)):
@@ -236,6 +259,37 @@ def check_terms(terms, n_dof: int, source: str = "from_terms", duplicates: str =
     return out
 
 
+class _element_words:
+    """Re-raise a `GMRInputError` about DOFs in the words of a graph's elements."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, err, tb):
+        if isinstance(err, GMRInputError):
+            msg = str(err)
+            for a, b in (("give one mass per DOF or fix the term's dof", "fix the term's element"),
+                         ("mass(es)", "element(s)"), ("DOF(s)", "element(s)"), ("DOFs", "elements"),
+                         ("DOF", "element"), ("dof", "element"), ("remove their masses", "remove the elements")):
+                msg = msg.replace(a, b)
+            raise GMRInputError(msg) from None
+        return False
+
+
+def _renamed(terms, old: str, new: str, source: str = "from_terms"):
+    """Term dicts with the key `old` renamed `new` (a term that has `new` already is refused)."""
+    if not isinstance(terms, (list, tuple)):
+        return terms
+    out = []
+    for i, t in enumerate(terms):
+        if isinstance(t, dict) and new in t:
+            raise GMRInputError(f"{source}: term {i} has the key {new!r}; terms of a "
+                                f"{'graph' if old == 'element' else 'chain or independent'} model name their law "
+                                f"with {old!r}")
+        out.append({(new if k == old else k): v for k, v in t.items()} if isinstance(t, dict) else t)
+    return out
+
+
 def coefficient_index(model: GlobalModel) -> list[tuple[str, int]]:
     """(physics, order) of each position of a DOF's flattened coefficient vector (the layout of
     `GlobalModel.covariance`): stiffness 0.., then velocity_damping 0.., then position_damping 0..."""
@@ -268,10 +322,14 @@ def _report_name(phys: str):
     return names.get(phys)
 
 
-def check_covariance(entries, n_dof: int, source: str = "from_terms") -> list[dict]:
+def check_covariance(entries, n_dof: int, source: str = "from_terms", key: str = "dof") -> list[dict]:
     """Validate the "covariance" extension of "gmr-model/1" (see `from_terms`); returns
     normalised entries (int dof, (physics, order) tuples, float64 matrix). Raises
-    `GMRInputError` naming the entry, the key and the fix."""
+    `GMRInputError` naming the entry, the key and the fix (`key="element"`: a graph's entries)."""
+    if key != "dof":
+        with _element_words():
+            return _renamed(check_covariance(_renamed(entries, key, "dof", source), n_dof, source), "dof", key,
+                            source)
     if not isinstance(entries, (list, tuple)):
         raise GMRInputError(f"{source}: 'covariance' must be a list, got {describe(entries)}; {_COV_FIX}")
     out, seen = [], set()
@@ -324,7 +382,7 @@ def covariance_entries(model: GlobalModel) -> list[dict] | None:
     for i in range(cov.shape[0]):
         keep = np.nonzero(np.diag(cov[i]) > 0)[0]
         if keep.size:
-            out.append({"dof": i, "terms": [[index[k][0], index[k][1]] for k in keep],
+            out.append({term_key(model.topology): i, "terms": [[index[k][0], index[k][1]] for k in keep],
                         "matrix": [[float(c) for c in row] for row in cov[i][np.ix_(keep, keep)]]})
     return out
 
@@ -340,7 +398,8 @@ def from_terms(
     - `masses`: one positive mass per DOF.
     - `terms`: `{"dof": i, "physics": p, "order": k, "coefficient": c}` (optional `"stderr"`),
       `p` one of "stiffness", "velocity_damping", "position_damping"; every DOF needs a term.
-    - `topology`: "independent" | "chain" (or a topology object).
+    - `topology`: "independent" | "chain" (or a topology object); a `Graph` takes one mass per
+      node and terms `{"element": e, ...}`, one law per element.
     - `min_orders`: smallest number of columns per physics (`{"stiffness": 4}`).
     - `duplicates`: "error" (default): two terms with the same (dof, physics, order) are
       refused; "add": their coefficients add (used to apply corrections to a model).
@@ -366,16 +425,22 @@ def from_terms(
         (2, Chain())
     """
     masses = check_masses(masses)
-    d = masses.shape[0]
     topology = as_topology(topology)
-    terms = check_terms(terms, d, duplicates=duplicates)
+    key = term_key(topology)
+    if isinstance(topology, Graph) and topology.nodes != masses.shape[0]:
+        raise GMRInputError(f"from_terms: {masses.shape[0]} masses for a graph of {topology.nodes} nodes; give one "
+                            f"mass per node")
+    d = topology.n_elements if isinstance(topology, Graph) else masses.shape[0]
+    terms = [{("dof" if k == key else k): v for k, v in t.items()}
+             for t in check_terms(terms, d, duplicates=duplicates, key=key)]
     min_orders = {} if min_orders is None else min_orders
     if not isinstance(min_orders, dict) or any(k not in KNOWN_PHYSICS for k in min_orders):
         raise GMRInputError(f"from_terms: min_orders must be a dict keyed by {KNOWN_PHYSICS}, got "
                             f"{describe(min_orders)}")
     for k, v in min_orders.items():
         as_whole_number(v, f"from_terms: min_orders[{k!r}]", lo=1)
-    cov_entries = None if covariance is None else check_covariance(covariance, d)
+    cov_entries = None if covariance is None else [
+        {("dof" if k == key else k): v for k, v in e.items()} for e in check_covariance(covariance, d, key=key)]
     arrays, errs = {}, {}
     for name in KNOWN_PHYSICS:
         orders = [t["order"] for t in terms if t["physics"] == name]
@@ -406,3 +471,14 @@ def from_terms(
         stderr={k: jnp.asarray(v) for k, v in errs.items()} if has_err else None,
         covariance=cov,
     )
+
+
+def to_graph(model: AbstractMechanicalModel) -> AbstractMechanicalModel:
+    """The same model on its `Graph`: a chain as elements [[-1, 0], [0, 1], ...], independent DOFs
+    as [[-1, i]]; the force laws are unchanged, the coordinates become the node displacements
+    (`model.topology.displacements(x)`)."""
+    from .._topology import as_graph
+
+    if not isinstance(model, AbstractMechanicalModel):
+        raise GMRInputError(f"to_graph: needs a mechanical model, got {type(model).__name__}")
+    return dataclasses.replace(model, topology=as_graph(model.topology, model.n_dof))

@@ -110,10 +110,10 @@ def force_band(
     if part != "restoring" and v is None:
         raise GMRInputError(f"force_band: part={part!r} needs the velocities v (one per DOF)")
     for name, z in (("x", x), ("v", v)):
-        if z is not None and jnp.shape(z) != (model.n_dof,):
-            raise GMRInputError(f"force_band takes one point: {name} must have shape ({model.n_dof},) (one value per "
+        if z is not None and jnp.shape(z) != (model.n_elements,):
+            raise GMRInputError(f"force_band takes one point: {name} must have shape ({model.n_elements},) (one value per "
                                 f"DOF), got shape {jnp.shape(z)}; for a grid of points use "
-                                f"jax.vmap(lambda x: force_band(model, x))(xs) with xs of shape (n, {model.n_dof})")
+                                f"jax.vmap(lambda x: force_band(model, x))(xs) with xs of shape (n, {model.n_elements})")
     phi = basis(model, x, v, part)
     mean = jnp.sum(phi * coefficients(model), axis=-1)
     var = jnp.einsum("ip,ipq,iq->i", phi, model.covariance, phi)

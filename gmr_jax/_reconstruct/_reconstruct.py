@@ -33,7 +33,7 @@ from .._recordings._derivatives import TONAL, apply_gain, band_edge, tonal_fract
 from .._recordings._inputs import as_recordings
 from .._recordings._recording import Recording, length_unit, regression_targets, validate
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
-from .._topology import as_topology
+from .._topology import Graph, as_topology
 from . import (
     _design_law,
     _noise,
@@ -832,6 +832,7 @@ def reconstruct(
     structured_noise: bool | None = None,
     errors_in_variables: bool = True,
     velocity_eiv: bool = True,
+    designs=None,
     throw: bool = True,
     progress: Callable[[str], None] | None = None,
 ) -> Solution:
@@ -848,7 +849,9 @@ def reconstruct(
       (`load_recording`) or dicts of named signals; missing v and a are estimated from x.
     - `library`: local library orders r, d (Eqs. 5-7). `solver`, `select`: the STLS settings (`select=None`:
       `solver.threshold` as given).
-    - `topology`: "chain" (default for several DOFs) or "independent". `masses`: per DOF (default: the recordings').
+    - `topology`: "chain" (default for several DOFs), "independent", or a `Graph` (x: node displacements; the
+      "evidence" route only: every element's law from every node's balance). `masses`: per DOF (default: the
+      recordings'). `designs`: on a `Graph`, one label per element; elements with one label share one law.
     - `well_tol`: recordings whose mean deformation differs by less than this fraction of the cell's spread are one well.
     - `screen_sigma`: local terms under this many standard errors are zeroed before the coordination (None: kept).
     - `coordination`: "auto", "gls", "hermite" (the paper's exact interpolant) or "evidence" (one posterior over
@@ -873,6 +876,8 @@ def reconstruct(
     User mistakes raise `GMRInputError` before anything is computed.
     """
     recordings = as_recordings(recordings)  # paths and arrays as well as Recordings
+    if isinstance(topology, Graph):
+        return _graph(recordings, topology, designs, coordination, settings, library, masses, throw, progress)
     if coordination == "evidence":
         return _evidence(recordings, settings, library, masses, topology, well_tol, throw, progress)
     given = dict(locals())  # the call's arguments, for rule 14d's refit (`_window_check`)
@@ -1116,6 +1121,29 @@ def reconstruct(
     _emit(warnings)
     sol = _solution(model, failure, "GMR", library, reports, training, warnings, recs)
     sol.stats["resolution"] = resolution
+    return sol
+
+
+def _graph(recordings, graph, designs, coordination, settings, library, masses, throw, progress) -> Solution:
+    """`reconstruct` on a `Graph` (`_graph`)."""
+    from ._estimator import ReconstructSettings
+    from ._graph import reconstruct_graph
+
+    if coordination not in ("auto", "evidence"):
+        raise GMRInputError(f"a graph is fitted on the 'evidence' route only (its elements' laws are identified "
+                            f"jointly from the nodes' balances), got coordination={coordination!r}; use "
+                            f"coordination='evidence'")
+    if settings is None:
+        settings = ReconstructSettings(damping_order=library.damping_order)
+    relieve_map_pressure()
+    say = progress or (lambda msg: None)
+    recs, masses, _, warnings = _resolve(recordings, masses, "independent", min_recordings=1)
+    sol = reconstruct_graph(recs, masses, graph, designs, settings, say)
+    sol.stats["warnings"] = warnings + sol.stats["warnings"]
+    sol.stats["settings"] = settings
+    _emit(sol.stats["warnings"])
+    if throw and sol.result != RESULTS.successful:
+        _Failure("reconstruct", True).note(sol.result, "graph: evidence maximisation")
     return sol
 
 

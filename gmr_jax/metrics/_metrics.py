@@ -1,4 +1,6 @@
-"""Accuracy metrics of a reconstructed model against a truth model (paper Sec. 2.3, Eq. 22)."""
+"""Accuracy metrics of a reconstructed model against a truth model (paper Sec. 2.3, Eq. 22).
+
+On a `Graph` the metrics read one element's law: `dof` is the element index, x its deformation."""
 
 from typing import NamedTuple
 
@@ -12,7 +14,7 @@ from .._model._uncertainty import PARTS, force_band
 
 
 def _grid_forces(model: AbstractMechanicalModel, dof: int, xs, vs, which: str):
-    d = model.n_dof
+    d = model.n_elements
 
     def one(x, v):
         xx = jnp.zeros(d).at[dof].set(x)
@@ -143,7 +145,7 @@ def band_coverage(model, truth, dof: int, x_range, v_range=None, *, part: str = 
     if part == "damping" and v_range is None:
         raise GMRInputError("band_coverage(part='damping') needs v_range, the speeds to measure the damping band on "
                             "(e.g. system.v_range[dof])")
-    d = model.n_dof
+    d = model.n_elements
     xs = np.linspace(*x_range, n)
     if part == "damping":
         vs = np.linspace(*v_range, n_v)

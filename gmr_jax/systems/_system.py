@@ -22,7 +22,12 @@ class System:
     `equilibria` (n, dof): the stable states data are recorded around; `sweep`: base chirp
     (f0, f1) in Hz over `duration` s; `x_range`, `v_range`: the phase-plane box where restoring
     and damping errors are measured (per DOF for chains); `orders`: library orders
-    {"gmr": (r, d), "gmc": (r, d)} used by the paper for this case."""
+    {"gmr": (r, d), "gmc": (r, d)} used by the paper for this case.
+
+    Systems on a `Graph` (lattices): `equilibria` are node displacements, `x_range`, `v_range`
+    are per element (deformation and its rate), `designs` (E,) labels the elements of one design,
+    and `drive="force"`: `make_recordings` drives every node with its own multisine force in the
+    band `sweep`, not the base."""
 
     name: str
     truth: AbstractMechanicalModel
@@ -35,6 +40,8 @@ class System:
     orders: dict = field(default_factory=dict)
     description: str = ""
     units: tuple = ("x", "v", "F")
+    designs: np.ndarray | None = None
+    drive: str = "base"
 
 
 @eqx.filter_jit
@@ -64,7 +71,16 @@ def make_recordings(
     Starts at rest at each equilibrium; sweeps the base displacement with amplitude
     `amplitude` from `sweep[0]` to `sweep[1]` Hz; records x, v and the absolute acceleration a
     of every mass, and the base acceleration, at `fs` Hz, each with white noise at `snr_db`
-    (None: noise-free). All equilibria are simulated in one vmapped solve."""
+    (None: noise-free). All equilibria are simulated in one vmapped solve.
+
+    A force-driven lattice (`drive="force"`): every node gets its own random-phase multisine
+    force over the band `sweep` (flat spectrum), scaled per configuration so that the linearised
+    response's largest RMS element deformation is `amplitude` (x units); the recordings carry
+    the node forces `force` (N, D) instead of `base_acc`."""
+    if system.drive == "force":
+        from ._lattice import force_recordings
+
+        return force_recordings(system, amplitude, snr_db=snr_db, seed=seed, duration=duration)
     duration = duration or system.duration
     model = system.truth
     d = model.n_dof
