@@ -210,10 +210,10 @@ TOL = 1e-6
 
 #: largest gradient of the evidence per row (per unit of a log or logit hyperparameter) at which an
 #: optimum that ran out of BFGS steps is accepted
-FLAT = 1e-4
+FLAT = 1e-3
 
 #: relative increase of the whitened data precision's diagonal before its Cholesky factorisation
-JITTER = 1e-10
+JITTER = 1e-13
 
 
 def log_hyperprior(h: Hyper):
