@@ -183,6 +183,12 @@ def _gaussian(sq, Gs, bs, fit0, logdet_noise, n):
     return sq * z, chol, log_ev
 
 
+def _covariance(chol, sq):
+    """The posterior covariance D A^-1 D from `_gaussian`'s factor of A and D = diag(sq)."""
+    inv = jax.scipy.linalg.cho_solve((chol, True), jnp.eye(sq.shape[0]))
+    return sq[:, None] * inv * sq[None, :]
+
+
 def _solve(h: Hyper, stats, basis: Basis, active):
     G, b, yy, n = stats
     beta = jnp.exp(-h.log_noise)
@@ -275,8 +281,7 @@ def _optimise(stats, basis: Basis, active, max_steps: int):
     # two starts: the evidence can have a local optimum at either end
     h, code = _minimise(loss, [_initial(stats, decay) for decay in (0.3, 0.7)], stats, max_steps)
     mean, chol, sq, log_ev = _solve(h, stats, basis, active)
-    inv = jax.scipy.linalg.cho_solve((chol, True), jnp.eye(sq.shape[0]))
-    return h, mean, sq[:, None] * inv * sq[None, :], log_ev + log_hyperprior(h), code._value
+    return h, mean, _covariance(chol, sq), log_ev + log_hyperprior(h), code._value
 
 
 def posterior(stats, basis: Basis, *, max_steps: int = 1024, throw: bool = True) -> Solution:
@@ -314,14 +319,20 @@ def posterior(stats, basis: Basis, *, max_steps: int = 1024, throw: bool = True)
     return out
 
 
+def _chebyshev_to_power(size: int) -> np.ndarray:
+    """Matrix C (size, size), C[m, i] the coefficient of u^m in T_i(u)."""
+    C = np.zeros((size, size))
+    for i in range(size):
+        c = np.polynomial.chebyshev.cheb2poly(np.eye(size)[i])
+        C[: c.shape[0], i] = c
+    return C
+
+
 def chebyshev_shift(a, b, degree: int):
     """Matrix S (K + 1, K + 1) with sum_i c_i T_i(a u + b) = sum_m (S c)_m T_m(u): Chebyshev
     coefficients in u of a law given by Chebyshev coefficients in u' = a u + b."""
     k = degree + 1
-    to_power = np.zeros((k, k))  # [m, i]: coefficient of u^m in T_i(u)
-    for i in range(k):
-        c = np.polynomial.chebyshev.cheb2poly(np.eye(k)[i])
-        to_power[: c.shape[0], i] = c
+    to_power = _chebyshev_to_power(k)
     to_cheb = np.linalg.inv(to_power)
     i = np.arange(k)
     binom = np.array([[float(math.comb(int(c), int(m))) if m <= c else 0.0 for c in i] for m in i])
@@ -403,8 +414,7 @@ def design_posterior(stats, maps, damping_sd, log_noise, basis: Basis, *, max_st
     starts = [Design(jnp.zeros(()), jnp.asarray(-1.0), jnp.full(j, t), log_noise) for t in (-6.0, 0.0)]
     d, code = _minimise(loss, starts, stats, max_steps)  # two starts: the members one design, or each its own
     E, mean, chol, sq, _ = _design_solve(d, stats, maps, damping_sd, basis)
-    inv = jax.scipy.linalg.cho_solve((chol, True), jnp.eye(sq.shape[0]))
-    cz = sq[:, None] * inv * sq[None, :]
+    cz = _covariance(chol, sq)
     means = jnp.einsum("jpz,z->jp", E, mean)
     covs = jnp.einsum("jpz,zy,jqy->jpq", E, cz, E)
     code = RESULTS.where(jnp.all(jnp.isfinite(means)), code, RESULTS.nonfinite)
@@ -419,11 +429,7 @@ def to_monomials(basis: Basis, centre, half, speed, scale):
     stiffness x^0..x^K, velocity damping sgn(v)|v|^0..d, position damping x^0..x^d v (the
     viscous part of C(x) v added to the velocity damping's v, x^0 v left at 0)."""
     k, d = basis.degree, basis.damping_order
-    cheb = np.zeros((k + 1, k + 1))  # [m, i]: coefficient of u^m in T_i(u)
-    for i in range(k + 1):
-        c = np.polynomial.chebyshev.cheb2poly(np.eye(k + 1)[i])
-        cheb[: c.shape[0], i] = c
-    cheb = jnp.asarray(cheb)
+    cheb = jnp.asarray(_chebyshev_to_power(k + 1))
     restoring = monomial_map(centre, half, k + 1) @ cheb * scale
     velocity = jnp.diag(scale / speed ** jnp.arange(d + 1.0))
     # u^j w, j = 1..d: (scale / V) sum_m S[m, j] x^m v

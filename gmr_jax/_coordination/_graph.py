@@ -17,13 +17,12 @@ p(K | rows): the mean of the most probable K, the mixture's covariance about it,
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
 from .._solution import RESULTS, Solution, as_result
-from ._bayes import OFF, Basis
+from ._bayes import _ADJOINT, OFF, Basis
 
 
 class GraphHyper(eqx.Module):
@@ -74,9 +73,6 @@ def _initial(stats, n_designs: int, decay: float) -> GraphHyper:
     var = yy / jnp.maximum(n, 1.0)
     return GraphHyper(jnp.zeros((n_designs, 3)), jnp.full((n_designs, 3), jnp.log(decay / (1.0 - decay))),
                       jnp.log(1e-2 * var + 1e-30))
-
-
-_ADJOINT = optx.ImplicitAdjoint(linear_solver=lx.AutoLinearSolver(well_posed=False))
 
 
 def _optimise(stats, basis: Basis, n_designs: int, active, max_steps: int):

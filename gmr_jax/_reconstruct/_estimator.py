@@ -43,31 +43,37 @@ class ReconstructSettings(eqx.Module):
     width: int | None = eqx.field(static=True, default=None)
 
 
+def balances(r, masses, topology) -> tuple[np.ndarray, np.ndarray]:
+    """Per mass of recording `r` (N, D each): the pointwise target p and the displacement s whose
+    second derivative completes it, y = p + s''. With a measured absolute acceleration a,
+    p = force - m a and s = 0; otherwise p = force - m base_acc and s = -m (mass displacement)."""
+    b, f = r.inputs()
+    if r.a is not None and "a" not in r.derived:
+        return f - r.a * masses[None, :], np.zeros_like(r.x)
+    return f - b[:, None] * masses[None, :], -topology.displacements(r.x) * masses[None, :]
+
+
 def _dof_arrays(recs, i: int, masses, topology):
-    """Per record of DOF `i`: x, v, the pointwise target p and the displacement s whose second
-    derivative completes it (y = p + s''), padded to one length with a mask."""
+    """Per record of DOF `i`: x, v and the carried `balances` p, s, padded to one length with a
+    mask."""
     xs, vs, ps, ss = [], [], [], []
     for r in recs:
-        b, f = r.inputs()
-        if r.a is not None and "a" not in r.derived:
-            p = topology.carried(f - r.a * masses[None, :])[:, i]
-            s = np.zeros(r.n_samples)
-        else:  # a = (mass displacement)'' + base_acc: the second derivative goes to the test function
-            p = topology.carried(f - b[:, None] * masses[None, :])[:, i]
-            s = topology.carried(-topology.displacements(r.x) * masses[None, :])[:, i]
-        xs.append(r.x[:, i]), vs.append(r.v[:, i]), ps.append(p), ss.append(s)
+        p, s = balances(r, masses, topology)
+        xs.append(r.x[:, i]), vs.append(r.v[:, i])
+        ps.append(topology.carried(p)[:, i]), ss.append(topology.carried(s)[:, i])
     n = max(len(a) for a in xs)
     pad = lambda arrs: np.stack([np.pad(a, (0, n - len(a))) for a in arrs])  # noqa: E731
     mask = np.stack([np.arange(n) < len(a) for a in xs])
     return pad(xs), pad(vs), pad(ps), pad(ss), mask
 
 
-def _width(recs, i: int, settings: ReconstructSettings) -> int:
+def window(signals, dt, n: int, settings: ReconstructSettings) -> int:
+    """Samples per test-function window: `settings.width`, else one period of the slowest of
+    `signals`' band edges, clipped to [9, n / 16] (n: the shortest record's samples)."""
     if settings.width is not None:
         return int(settings.width)
-    edge = min(band_edge(r.x[:, i], r.dt) for r in recs)
-    n = min(r.n_samples for r in recs)
-    return int(np.clip(round(1.0 / (max(edge, 1e-12) * recs[0].dt)), 9, max(9, n // 16)))
+    edge = min(band_edge(sig, dt) for sig in signals)
+    return int(np.clip(round(1.0 / (max(edge, 1e-12) * dt)), 9, max(9, n // 16)))
 
 
 def reconstruct_arrays(
@@ -160,7 +166,7 @@ def estimate(recs, masses, topology, settings: ReconstructSettings, wells, say, 
     for i in range(d):
         _, labels, groups = wells[i]
         say(f"{f'DOF {i} ({i + 1}/{d}): ' if d > 1 else ''}posterior of the global law")
-        width = _width(recs, i, settings)
+        width = window([r.x[:, i] for r in recs], recs[0].dt, min(r.n_samples for r in recs), settings)
         x, v, p, s, mask = _dof_arrays(recs, i, masses, topology)
         geometry, wstats, sol = _fit(jnp.asarray(x), jnp.asarray(v), jnp.asarray(p), jnp.asarray(s),
                                      jnp.asarray(mask), jnp.asarray(labels), len(groups), settings, width, recs[0].dt)

@@ -21,23 +21,9 @@ from .._coordination import _bayes
 from .._coordination._graph import graph_posterior
 from .._custom_types import Array, Bool, Float
 from .._errors import GMRInputError
-from .._recordings._derivatives import band_edge
 from .._solution import RESULTS, Solution
 from .._topology import Graph
-from ._estimator import ReconstructSettings, model_from
-
-
-def node_targets(recs, masses) -> tuple[np.ndarray, np.ndarray]:
-    """(p, s) (R, D, N) of every record's node balances, y = p + s''."""
-    ps, ss = [], []
-    for r in recs:
-        b, f = r.inputs()
-        if r.a is not None and "a" not in r.derived:
-            p, s = f - r.a * masses[None, :], np.zeros_like(r.x)
-        else:  # a = x'' + base_acc: the second derivative goes to the test function
-            p, s = f - b[:, None] * masses[None, :], -r.x * masses[None, :]
-        ps.append(p.T), ss.append(s.T)
-    return np.stack(ps), np.stack(ss)
+from ._estimator import ReconstructSettings, balances, model_from, window
 
 
 def graph_arrays(
@@ -106,14 +92,6 @@ def _fit(dx, dv, p, s, mask, incidence, design, width, dt, settings):
     return graph_arrays(dx, dv, p, s, mask, incidence, design, width=width, dt=dt, settings=settings)
 
 
-def _width(deformations, dt, n, settings: ReconstructSettings) -> int:
-    """Samples per window: one period of the slowest element's band edge (`ReconstructSettings.width`)."""
-    if settings.width is not None:
-        return int(settings.width)
-    edge = min(band_edge(d, dt) for d in deformations)
-    return int(np.clip(round(1.0 / (max(edge, 1e-12) * dt)), 9, max(9, n // 16)))
-
-
 def check_designs(designs, graph: Graph) -> np.ndarray:
     """(E,) integer design labels 0..G-1 (None: every element its own design)."""
     e = graph.n_elements
@@ -140,9 +118,9 @@ def reconstruct_graph(recs, masses, graph: Graph, designs, settings: Reconstruct
     pad = lambda a: np.pad(a, [(0, 0)] * (a.ndim - 1) + [(0, n - a.shape[-1])])  # noqa: E731
     dx = np.stack([pad(np.asarray(graph.deformations(r.x)).T) for r in recs], axis=1)  # (E, R, N)
     dv = np.stack([pad(np.asarray(graph.deformations(r.v)).T) for r in recs], axis=1)
-    p, s = zip(*[(pad(a), pad(b)) for a, b in zip(*node_targets(recs, masses))])
+    p, s = zip(*[(pad(a.T), pad(b.T)) for a, b in (balances(r, masses, graph) for r in recs)])
     mask = np.stack([np.arange(n) < r.n_samples for r in recs])
-    width = _width([r_ for e in dx for r_ in e], recs[0].dt, min(r.n_samples for r in recs), settings)
+    width = window([r_ for e in dx for r_ in e], recs[0].dt, min(r.n_samples for r in recs), settings)
     say(f"graph of {d} nodes, {graph.n_elements} elements, {n_designs} design(s): posterior of every law")
     design = np.eye(n_designs)[labels]
     coef, cov, sol = _fit(*(jnp.asarray(a) for a in (dx, dv, np.stack(p), np.stack(s), mask, graph.incidence,
