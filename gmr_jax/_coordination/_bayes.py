@@ -152,6 +152,22 @@ def well_statistics(rows, target, valid, well: Int[Array, " records"], n_wells: 
     return G, b, yy, n
 
 
+def well_factors(rows, target, valid, well: Int[Array, " records"], n_wells: int):
+    """Per well: the triangular factor F_w (P + 1, P + 1) of its valid rows [Phi | y], so that
+    F_w' F_w = [[G_w, b_w], [b_w', yy_w]] (the square-root form of `well_statistics`: the
+    evidence from it needs no difference of large sums), and the row count n_w."""
+    p = rows.shape[-1] + 1
+    X = jnp.concatenate([rows, target[..., None]], axis=-1) * valid[..., None]
+
+    def factor(w):
+        Xw = (X * (well == w)[:, None, None]).reshape(-1, p)
+        return jnp.linalg.qr(jnp.concatenate([Xw, jnp.zeros((p, p))]), mode="r")
+
+    F = jax.vmap(factor)(jnp.arange(n_wells))
+    n = jnp.einsum("rw,rm->w", jax.nn.one_hot(well, n_wells, dtype=rows.dtype), valid.astype(rows.dtype))
+    return F, n
+
+
 class Hyper(eqx.Module):
     """log scale and logit decay per family (3,), log noise variance per well (W,)."""
 
@@ -167,35 +183,42 @@ def prior_sd(h: Hyper, basis: Basis):
     return jnp.exp(h.log_scale[fam] + power * jax.nn.log_sigmoid(h.logit_decay)[fam])
 
 
-def _gaussian(sq, Gs, bs, fit0, logdet_noise, n):
-    """Posterior and log evidence of z ~ N(0, diag(sq^2)) under rows with precision-weighted
-    Gram Gs = Phi' B Phi, moment bs = Phi' B y, y' B y = fit0, sum log det B = logdet_noise and n
-    rows; in whitened form A = I + D G D (D = diag(sq)), mean = D A^-1 D b. The diagonal of D G D
-    is raised by `JITTER` of itself: where the data fix a direction 1e15 times better than the
-    prior, rounding in the factorisation would otherwise exceed the identity."""
-    M = sq[:, None] * Gs * sq[None, :]
-    A = jnp.eye(sq.shape[0]) + M + JITTER * jnp.diag(jnp.diagonal(M))
-    chol = jnp.linalg.cholesky(A)
-    z = jax.scipy.linalg.cho_solve((chol, True), sq * bs)
-    logdet = 2.0 * jnp.sum(jnp.log(jnp.diag(chol)))
-    fit = fit0 - jnp.dot(sq * bs, z)
-    log_ev = 0.5 * (logdet_noise - fit - logdet - n * jnp.log(2.0 * jnp.pi))
-    return sq * z, chol, log_ev
+def _gaussian(sq, X, t, logdet_noise, n):
+    """Posterior and log evidence of z ~ N(0, diag(sq^2)) under square-root data rows X, t
+    (X'X = Phi' B Phi, X't = Phi' B y, t't = y' B y), sum log det B = `logdet_noise` and n rows.
+    In whitened form A = I + D X'X D (D = diag(sq)), mean = D A^-1 D X't: one QR factorisation
+    of [[X D, t], [I, 0]] gives the factor R of A, log det A, and the residual
+    y'By - b'D A^-1 D b as its last diagonal entry squared, without cancellation."""
+    P = sq.shape[0]
+    S = jnp.concatenate([jnp.concatenate([X * sq[None, :], t[:, None]], axis=1),
+                         jnp.concatenate([jnp.eye(P), jnp.zeros((P, 1))], axis=1)])
+    R = jnp.linalg.qr(S, mode="r")
+    z = jax.scipy.linalg.solve_triangular(R[:P, :P], R[:P, P], lower=False)
+    logdet = 2.0 * jnp.sum(jnp.log(jnp.abs(jnp.diag(R[:P, :P]))))
+    log_ev = 0.5 * (logdet_noise - R[P, P] ** 2 - logdet - n * jnp.log(2.0 * jnp.pi))
+    return sq * z, R[:P, :P].T, log_ev
 
 
 def _covariance(chol, sq):
-    """The posterior covariance D A^-1 D from `_gaussian`'s factor of A and D = diag(sq)."""
+    """The posterior covariance D A^-1 D from `_gaussian`'s factor L (L L' = A) and D = diag(sq)."""
     inv = jax.scipy.linalg.cho_solve((chol, True), jnp.eye(sq.shape[0]))
     return sq[:, None] * inv * sq[None, :]
 
 
+def _weighted(F, log_noise):
+    """The wells' factors weighted by their noise precisions beta = exp(-log_noise): the
+    square-root rows X, t."""
+    root = jnp.exp(-0.5 * log_noise)
+    X = root[..., None, None] * F
+    return X[..., :-1], X[..., -1]
+
+
 def _solve(h: Hyper, stats, basis: Basis, active):
-    G, b, yy, n = stats
-    beta = jnp.exp(-h.log_noise)
+    F, n = stats
     sq = prior_sd(h, basis) * active  # inactive columns: zero prior variance
-    Gs = jnp.einsum("w,wij->ij", beta, G)
-    bs = jnp.einsum("w,wi->i", beta, b)
-    mean, chol, log_ev = _gaussian(sq, Gs, bs, jnp.sum(beta * yy), jnp.sum(n * jnp.log(beta)), jnp.sum(n))
+    X, t = _weighted(F, h.log_noise)
+    p = F.shape[-1]
+    mean, chol, log_ev = _gaussian(sq, X.reshape(-1, p - 1), t.reshape(-1), -jnp.sum(n * h.log_noise), jnp.sum(n))
     return mean, chol, sq, log_ev
 
 
@@ -218,10 +241,6 @@ TOL = 1e-6
 #: optimum that ran out of BFGS steps is accepted
 FLAT = 1e-3
 
-#: relative increase of the whitened data precision's diagonal before its Cholesky factorisation
-JITTER = 1e-13
-
-
 def log_hyperprior(h: Hyper):
     """log p(hyperparameters) up to a constant: independent normals on the log scales and the
     logit decays (`HYPER_SD`), flat on the log noise variances."""
@@ -229,8 +248,8 @@ def log_hyperprior(h: Hyper):
 
 
 def _initial(stats, decay: float) -> Hyper:
-    _, _, yy, n = stats
-    var = yy / jnp.maximum(n, 1.0)
+    F, n = stats
+    var = jnp.sum(F[..., -1] ** 2, axis=-1) / jnp.maximum(n, 1.0)
     return Hyper(jnp.zeros(3), jnp.full(3, jnp.log(decay / (1.0 - decay))), jnp.log(1e-2 * var + 1e-30))
 
 
@@ -276,7 +295,7 @@ def _minimise(loss, starts, args, max_steps: int):
 
 def _optimise(stats, basis: Basis, active, max_steps: int):
     def loss(h, args):
-        return -(log_evidence(h, args, basis, active) + log_hyperprior(h)) / jnp.maximum(jnp.sum(args[3]), 1.0)
+        return -(log_evidence(h, args, basis, active) + log_hyperprior(h)) / jnp.maximum(jnp.sum(args[1]), 1.0)
 
     # two starts: the evidence can have a local optimum at either end
     h, code = _minimise(loss, [_initial(stats, decay) for decay in (0.3, 0.7)], stats, max_steps)
@@ -291,7 +310,7 @@ def posterior(stats, basis: Basis, *, max_steps: int = 1024, throw: bool = True)
 
     **Arguments:**
 
-    - `stats`: `(G, b, yy, n)` from `well_statistics` (wells on the leading axis).
+    - `stats`: `(F, n)` from `well_factors` (wells on the leading axis).
     - `basis`: the families' sizes.
     - `max_steps`: BFGS steps on the negative log evidence.
 
@@ -349,6 +368,7 @@ class Design(eqx.Module):
     log_scale: Float[Array, ""]
     logit_decay: Float[Array, ""]
     log_spread: Float[Array, " members"]
+    logit_spread_decay: Float[Array, " members"]
     log_noise: Float[Array, "members wells"]
 
 
@@ -366,22 +386,23 @@ def _design_matrices(maps, damping: int):
 
 
 def _design_solve(d: Design, stats, maps, damping_sd, basis: Basis):
-    G, b, yy, n = stats  # (J, W, P, P), (J, W, P), (J, W), (J, W)
-    beta = jnp.exp(-d.log_noise)
+    F, n = stats  # (J, W, P + 1, P + 1), (J, W)
     E = _design_matrices(maps, damping_sd.shape[1])
-    Gs = jnp.einsum("jpz,jw,jwpq,jqy->zy", E, beta, G, E)
-    bs = jnp.einsum("jpz,jw,jwp->z", E, beta, b)
+    X, t = _weighted(F, d.log_noise)
+    X = jnp.einsum("jwrp,jpz->jwrz", X, E)
     power = jnp.asarray(basis.decay_power()[: basis.degree + 1])
     shape = jnp.exp(power * jax.nn.log_sigmoid(d.logit_decay))
-    member = jnp.concatenate([jnp.exp(d.log_spread)[:, None] * shape[None, :], damping_sd], axis=1)
+    own = jnp.exp(power[None, :] * jax.nn.log_sigmoid(d.logit_spread_decay)[:, None])
+    member = jnp.concatenate([jnp.exp(d.log_spread)[:, None] * own, damping_sd], axis=1)
     sq = jnp.concatenate([jnp.exp(d.log_scale) * shape, member.reshape(-1)])
-    mean, chol, log_ev = _gaussian(sq, Gs, bs, jnp.sum(beta * yy), jnp.sum(n * jnp.log(beta)), jnp.sum(n))
+    mean, chol, log_ev = _gaussian(sq, X.reshape(-1, X.shape[-1]), t.reshape(-1), -jnp.sum(n * d.log_noise),
+                                   jnp.sum(n))
     return E, mean, chol, sq, log_ev
 
 
 def _log_design_prior(d: Design):
     return -0.5 * (jnp.sum((jnp.append(d.log_spread, d.log_scale) / HYPER_SD[0]) ** 2)
-                   + (d.logit_decay / HYPER_SD[1]) ** 2)
+                   + jnp.sum((jnp.append(d.logit_spread_decay, d.logit_decay) / HYPER_SD[1]) ** 2))
 
 
 def design_posterior(stats, maps, damping_sd, log_noise, basis: Basis, *, max_steps: int = 1024,
@@ -398,7 +419,7 @@ def design_posterior(stats, maps, damping_sd, log_noise, basis: Basis, *, max_st
 
     **Arguments:**
 
-    - `stats`: the members' `well_statistics`, stacked (J, W, ...).
+    - `stats`: the members' `well_factors`, stacked (J, W, ...).
     - `maps`: (J, K + 1, K + 1) A_j, the design's normalised Chebyshev coefficients to member
       j's scaled restoring coefficients.
     - `damping_sd`: (J, P - K - 1) the damping columns' prior standard deviations.
@@ -408,10 +429,10 @@ def design_posterior(stats, maps, damping_sd, log_noise, basis: Basis, *, max_st
 
     def loss(d, args):
         ev = _design_solve(d, args, maps, damping_sd, basis)[4]
-        return -(ev + _log_design_prior(d)) / jnp.maximum(jnp.sum(args[3]), 1.0)
+        return -(ev + _log_design_prior(d)) / jnp.maximum(jnp.sum(args[1]), 1.0)
 
     j = maps.shape[0]
-    starts = [Design(jnp.zeros(()), jnp.asarray(-1.0), jnp.full(j, t), log_noise) for t in (-6.0, 0.0)]
+    starts = [Design(jnp.zeros(()), jnp.asarray(-1.0), jnp.full(j, t), jnp.full(j, -1.0), log_noise) for t in (-6.0, 0.0)]
     d, code = _minimise(loss, starts, stats, max_steps)  # two starts: the members one design, or each its own
     E, mean, chol, sq, _ = _design_solve(d, stats, maps, damping_sd, basis)
     cz = _covariance(chol, sq)

@@ -131,7 +131,7 @@ def _prepare(x, v, p, s, mask, well, n_wells, width, dt, settings):
     speed = jnp.max(jnp.abs(v) * m)
     rows, target, valid = _bayes.weak_rows(x, v, p, s, mask, centre, half, speed, basis, width, dt)
     scale = jnp.sqrt(jnp.sum(valid * target**2) / jnp.maximum(jnp.sum(valid), 1.0))
-    stats = _bayes.well_statistics(rows, target / scale, valid, well, n_wells)
+    stats = _bayes.well_factors(rows, target / scale, valid, well, n_wells)
     return basis, (centre, half, speed, scale), stats
 
 
