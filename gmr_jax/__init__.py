@@ -48,11 +48,7 @@ from ._fit._threshold import select_threshold as select_threshold
 from ._coordination._coordinate import GlobalCoefficients as GlobalCoefficients, coordinate as coordinate
 from ._coordination._gls import hermite_gls as hermite_gls
 from ._coordination._hermite import hermite_interpolate as hermite_interpolate
-from ._coordination._joint import (
-    JointSettings as JointSettings,
-    inadmissible as inadmissible,
-    joint_coordinate as joint_coordinate,
-)
+from ._model._admissible import inadmissible as inadmissible
 
 # the global model (Eq. 1)
 from ._model._io import (
@@ -74,7 +70,6 @@ from ._model._pysindy import from_pysindy as from_pysindy, to_pysindy as to_pysi
 # reconstruction (Algorithm 1) and the GMC-SINDy baseline
 from ._reconstruct._reconstruct import gmc_sindy as gmc_sindy, reconstruct as reconstruct
 from ._recordings._recording import regression_targets as regression_targets
-from ._reconstruct._resolution import ResolutionReport as ResolutionReport
 from ._reconstruct._estimator import (
     ReconstructSettings as ReconstructSettings,
     reconstruct_arrays as reconstruct_arrays,

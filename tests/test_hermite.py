@@ -235,31 +235,3 @@ def test_damping_polynomial_degree_starts_at_zero():
     herm, gls = g.coordinate(fits, lib, method="hermite"), g.coordinate(fits, lib)
     assert int(herm.stats["K_d"]) == 5 and int(gls.stats["K_d"]) <= 2
     assert err(gls) < 0.015 and err(gls) < 0.5 * err(herm), (err(gls), err(herm))
-    # the band's embedded error is that of the law chosen (one next-degree vector, not the interpolant's three)
-    from gmr_jax._coordination._discrepancy import discrepancy
-
-    assert len(discrepancy(jax.device_get(fits), lib)["damping"][0]) == 1
-
-
-def test_a_value_only_well_keeps_its_value_in_the_band():
-    """Three wells whose damping data fix the viscous value only (order 0, audit D F8 at 30 dB): the embedded error
-    of the exact quadratic through them is the Hermite remainder A_K omega(x) / span, zero at every well, not the
-    interpolants without one well's value (which put the spread between the wells' values into the band at each
-    well: -0.58 .. 1.39 around 0.2-0.5)."""
-    from gmr_jax._coordination._discrepancy import discrepancy
-
-    lib = g.Library(5, 1)
-    wells = np.array([-0.012, 0.001, 0.015])
-    v_idx, s_idx = lib.indices("velocity_damping"), lib.indices("stiffness")
-    coefs = np.zeros((3, lib.n_terms))
-    for i, x in enumerate(wells):
-        coefs[i, s_idx[:4]] = [x**3 - 1e-4 * x, 3 * x**2 - 1e-4, 3 * x, 1.0]
-        coefs[i, v_idx[1]] = 0.2 + 1400 * x**2
-    fits = jax.device_get(_fits(wells, coefs, lib))
-    vectors, _ = discrepancy(fits, lib, method="hermite")["damping"]
-    assert len(vectors) == 1
-    poly = np.polynomial.Polynomial(vectors[0])
-    np.testing.assert_allclose(poly(wells), 0.0, atol=1e-12)
-    span = np.ptp(wells)
-    mid = 0.5 * (wells[0] + wells[1])
-    np.testing.assert_allclose(poly(mid), 1400 * np.prod(mid - wells) / span, rtol=1e-9)

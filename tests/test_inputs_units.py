@@ -127,7 +127,7 @@ def test_every_fit_option_shows_its_default(capsys):
     with pytest.raises(SystemExit):
         main(["fit", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    for shown in ("local restoring fit (default: 5)", "(default: gmr)", "auto (default:", "(default: from recordings"):
+    for shown in ("local restoring fit (default: 5)", "(default: gmr)", "evidence (default:", "(default: from recordings"):
         assert shown in text, shown
 
 

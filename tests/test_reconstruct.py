@@ -1,4 +1,5 @@
-"""Paper cases (Sec. 2.3, 3.1): GMR accuracy targets, GMC-SINDy measured beside it."""
+"""Paper cases (Sec. 2.3, 3.1): accuracy of the default route and of the paper's route, GMC-SINDy
+measured beside them."""
 
 import warnings
 
@@ -6,7 +7,6 @@ import numpy as np
 import pytest
 
 import gmr_jax as g
-from gmr_jax._reconstruct._local_rules import low_order_terms, velocity_terms_not_shared
 from gmr_jax.metrics._metrics import damping_error, equilibria, restoring_error
 
 from _truth import restoring_l2
@@ -28,11 +28,13 @@ def test_joint_small_amplitude(joint_data, damping, term):
     res = g.reconstruct(recs, g.Library(5, 5))
     m = res.value
     assert restoring_error(m, s.truth, 0, s.x_range[0]) < 0.01
-    assert damping_error(m, s.truth, 0, s.x_range[0], s.v_range[0]) < 0.05
-    # Table B2 shape: cubic restoring and the right damping term dominate
+    # the damping at the recorded speeds; beyond them the records do not fix it, and the band says so
+    speed = max(float(np.max(np.abs(r.v))) for r in recs)
+    assert damping_error(m, s.truth, 0, s.x_range[0], [-speed, speed]) < 0.02
+    # the restoring law is the cubic of Table B2: its degree by the evidence, its coefficients within 1 %
+    assert res.stats["dofs"][0].stats["degree"] == 3
     k = np.asarray(m.stiffness)[0]
-    np.testing.assert_allclose(k[1], -2244, rtol=0.01)
-    np.testing.assert_allclose(k[3], 1755, rtol=0.01)
+    np.testing.assert_allclose(k[[1, 3]], [-2244, 1755], rtol=0.01)
     phys, order, value = term
     np.testing.assert_allclose(np.asarray(getattr(m, phys))[0, order], value, rtol=0.02)
     # standard errors come with the model
@@ -40,12 +42,12 @@ def test_joint_small_amplitude(joint_data, damping, term):
     stable = [x for x, st in equilibria(m, 0, s.x_range[0]) if st]
     np.testing.assert_allclose(stable, [-1.1308, 1.1308], atol=5e-3)
     assert all(min(sc["r2"]) > 0.99 for sc in res.stats["training"].values())
-    # the default coordination ("auto") keeps the paper's route on the paper's case, to the bit
-    # (issue 15: the joint regression replaces it only where it is inadmissible)
-    assert res.stats["dofs"][0].stats["coordination"] == "gls"
+    assert res.stats["dofs"][0].stats["coordination"] == "evidence"
+    # the paper's route on the same records: Table B2's coefficients
     paper = g.reconstruct(recs, g.Library(5, 5), coordination="gls").value
-    for block in ("stiffness", "velocity_damping", "position_damping"):
-        np.testing.assert_array_equal(np.asarray(getattr(m, block)), np.asarray(getattr(paper, block)))
+    assert restoring_error(paper, s.truth, 0, s.x_range[0]) < 0.01
+    np.testing.assert_allclose(np.asarray(paper.stiffness)[0, [1, 3]], [-2244, 1755], rtol=0.01)
+    np.testing.assert_allclose(np.asarray(getattr(paper, phys))[0, order], value, rtol=0.02)
 
 
 def test_gmc_sindy_runs_and_degrades(joint_data):
@@ -70,7 +72,7 @@ def test_nes_three_equilibria():
     recs = g.systems.make_recordings(s, 1e-3, snr_db=60.0, seed=0, duration=5.0)
     said = []
     m = g.reconstruct(recs, g.Library(3, 3), progress=said.append).value
-    assert said[0] == "local fits at 3 wells" and said[1].startswith("coordination") and "sanity" in said[-1]
+    assert said[0] == "posterior of the global law" and "checks" in said[-1]
     assert restoring_error(m, s.truth, 0, s.x_range[0]) < 0.02
     got, want = equilibria(m, 0, s.x_range[0]), equilibria(s.truth, 0, s.x_range[0])
     assert [st for _, st in got] == [st for _, st in want] == [True, False, True, False, True]
@@ -113,89 +115,22 @@ def test_keep_exempts_terms_from_the_threshold():
     i_xv = list(lib.terms()).index(("position_damping", 1))
     plain = g.fit_local(x, v, y, lib, solver, None).value
     assert float(plain.coef[i_xv]) == 0.0
-    keep = low_order_terms(lib)  # x^0, x^1, v, x v: what `reconstruct` exempts
-    assert keep.tolist() == [True, True, False, False, False, True, True]
+    keep = np.array([t in (("stiffness", 0), ("stiffness", 1), ("velocity_damping", 1), ("position_damping", 1))
+                     for t in lib.terms()])
     kept = g.fit_local(x, v, y, lib, solver, None, keep=keep).value
     assert abs(float(kept.coef[i_xv]) - 20.0) < 0.01
     assert 0 < float(kept.covariance[i_xv, i_xv]) < 1e-5
 
 
-def test_unshared_velocity_damping_mask():
-    lib = g.Library(3, 3)
-    terms = lib.terms()
-    coef = np.zeros((2, lib.n_terms))
-    col = {t: i for i, t in enumerate(terms)}
-    coef[:, col[("velocity_damping", 1)]] = 0.3  # viscous: part of C(x) v, never judged here
-    coef[0, col[("velocity_damping", 3)]] = 5.0  # v^3 at one well only: not shared
-    coef[:, col[("velocity_damping", 2)]] = 1.0  # v|v| at both wells: shared
-    coef[0, col[("position_damping", 1)]] = 2.0  # x v differs by well legitimately
-    mask = velocity_terms_not_shared(coef, lib)
-    assert [t for t, m in zip(terms, mask) if m] == [("velocity_damping", 3)]
-
-
-@pytest.mark.slow  # a 5-cell reproduction, three times
-def test_damping_terms_found_at_one_well_only_are_dropped():
-    """Kresling chain (damping ratio 0.2, 0.75 mm, seed 4): the base cell's folded-well fit selected v|v|, v^3,
-    v^3|v| (each > 3 sigma) in place of the unselected x^2 v; averaged by Eq. (21) they put 8 % error on the global
-    damping. The sharing rule, the refit of a well whose screen zeroed some damping terms and x^2 v kept where every
-    well resolves it (`_extend_position_damping`) each remove them: with and without sharing, the base cell's
-    damping within 0.5 %, and the cells where every well agrees untouched by the sharing."""
-    system = g.systems.kresling5(damping_ratio=0.2)
-    recs = g.systems.make_recordings(system, 7.5e-4, snr_db=60.0, seed=4)
-    box = system.x_range[0], system.v_range[0]
-    # shared_design off: the cells' shared curvature (a prior on every local refit) also removes it
-    raw = g.reconstruct(recs, g.Library(5, 5), shared_damping=False, extend_restoring=False, shared_design=False)
-    default = g.reconstruct(recs, g.Library(5, 5), shared_damping=False)
-    res = g.reconstruct(recs, g.Library(5, 5), extend_restoring=False, shared_design=False)
-    for sol in (raw, default, res):
-        assert damping_error(sol.value, system.truth, 0, *box) < 0.005  # measured 0.011-0.014 % (the artefact: 8 %)
-    for i in range(1, 5):  # cells where every well agrees are untouched
-        assert res.stats["dofs"][i].stats["dropped_velocity_damping"] == []
-        np.testing.assert_array_equal(res.stats["dofs"][i].local_coef, raw.stats["dofs"][i].local_coef)
-
-
-def test_screen_truncates_the_restoring_series_from_the_top_only():
-    """An unresolved q^3 under a resolved q^4 is kept (the coordination would take a zero there as
-    exact); an unresolved top order is dropped; a zero STLS chose stays a known zero."""
-    from gmr_jax._reconstruct._local_rules import _screen
-
-    lib = g.Library(5, 1)  # 1, q .. q^5, sgn(v), v, q v
-    se = np.array([1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0])
-    coef = np.array([[5.0, 9.0, 4.0, 2.0, 6.0, 1.0, 0.5, 8.0, 0.2],   # q^3 at t = 2 under q^4 at 6; q^5 at 1
-                     [5.0, 9.0, 0.0, 2.0, 6.0, 0.0, 0.0, 8.0, 4.0]])  # q^2 a zero STLS chose
-    fits = g.LocalFit(equilibrium=np.zeros(2), coef=coef, covariance=np.stack([np.diag(se**2)] * 2),
-                      threshold=np.zeros(2), rss=np.ones(2), n_samples=np.full(2, 100.0))
-    out = np.asarray(_screen(fits, 3.0, lib).coef)
-    np.testing.assert_array_equal(out[0], [5.0, 9.0, 4.0, 2.0, 6.0, 0.0, 0.0, 8.0, 0.0])
-    np.testing.assert_array_equal(out[1], [5.0, 9.0, 0.0, 2.0, 6.0, 0.0, 0.0, 8.0, 4.0])
-    assert np.asarray(_screen(fits, 3.0, lib).covariance)[0, 3, 3] == 1.0
-    plain = np.asarray(_screen(fits, 3.0).coef)  # without the library: every term on its own
-    assert plain[0, 3] == 0.0
-
-
-def test_screen_drops_an_unresolved_top_order_above_zeros():
-    """The restoring orders above the top one are zeros with zero standard error (0 >= 3 x 0):
-    they are not resolved orders, so an unresolved q^3 under them is dropped (the bug that kept
-    every fitted order under a zero)."""
-    from gmr_jax._reconstruct._local_rules import _screen
-
-    lib = g.Library(5, 1)
-    coef = np.array([[5.0, 9.0, 4.0, 0.6, 0.0, 0.0, 0.0, 8.0, 0.0]])
-    cov = np.diag([1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0])[None]
-    fits = g.LocalFit(equilibrium=np.zeros(1), coef=coef, covariance=cov, threshold=np.zeros(1), rss=np.ones(1),
-                      n_samples=np.full(1, 100.0))
-    np.testing.assert_array_equal(np.asarray(_screen(fits, 3.0, lib).coef)[0], [5.0, 9.0, 4.0, 0, 0, 0, 0, 8.0, 0])
-
-
 def test_noise_free_records_give_the_truths_degree():
-    """Noise-free records of the bistable joint (a cubic): the global law is the cubic, not a higher
-    interpolant that exact local data "confirm" (audit D F6: noise-free records gave degree 7 here, degree 17
-    with twelve spurious "significant" terms on a tri-stable quintic)."""
+    """Noise-free records of the bistable joint (a cubic): the evidence puts the degree at the
+    cubic's, and the law is the cubic to rounding (a higher interpolant that exact local data
+    "confirm" is the failure this guards)."""
     s = g.systems.bistable_joint("position_independent")
     recs = g.systems.make_recordings(s, np.deg2rad(1.0), snr_db=None, duration=4.0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sol = g.reconstruct(recs, g.Library(*s.orders["gmr"]))
     stiff = np.asarray(sol.value.stiffness)[0]
-    assert np.trim_zeros(stiff, "b").size - 1 == 3
-    assert restoring_l2(s, stiff)[0] < 1e-8
+    assert sol.stats["dofs"][0].stats["degree"] == 3
+    assert restoring_l2(s, stiff)[0] < 1e-6

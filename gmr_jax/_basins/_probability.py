@@ -10,7 +10,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int, PRNGKeyArray
 
 from .._config import relieve_map_pressure
-from .._coordination._joint import damping_faults, fall_speed
+from .._model._admissible import damping_faults, fall_speed
 from .._errors import GMRInputError
 from .._model._model import GlobalModel
 from .._model._uncertainty import sample_models

@@ -5,7 +5,6 @@ refusal is an input error (exit 2); a warning is printed to stderr as a `warning
 recorded in the model file under "warnings", and the exit status stays 0 (3 with --strict).
 """
 
-import argparse
 import sys
 import warnings
 from pathlib import Path
@@ -30,33 +29,16 @@ def register(sub):
     f.add_argument("--method", choices=["gmr", "gmc-sindy"], default="gmr",
                    help="gmr: local fits at each well, then one global law; gmc-sindy: the baseline, one library on "
                    "all data")
-    f.add_argument("--coordination", choices=["auto", "gls", "hermite", "joint", "evidence"], default="auto",
-                   help="GMR's global step: auto (default: the paper's covariance-weighted route unless it fails "
-                   "its own data or its damping feeds energy in, then the joint regression; its damping also where the "
-                   "noise of a measured v moves it), gls, hermite (the "
-                   "paper's exact interpolant), joint (one penalised regression on all wells' data, admissible "
-                   "models only), evidence (one posterior of all wells' records: the law, its degree and its band "
-                   "from the evidence, standard errors and band from one covariance)")
-    f.add_argument("--no-shared-design", action="store_true",
-                   help="chains: each cell alone (by default, cells of one design lend the restoring orders their "
-                   "local fits resolve to the weakly excited cells, as a prior on those cells' own fits; the model "
-                   "file's shared_design says who lent what)")
-    f.add_argument("--no-eiv", action="store_true",
-                   help="plain least squares in the local fits (by default, where x is measured with the "
-                   "accelerations, they are corrected for the noise on x: errors in variables)")
-    f.add_argument("--no-velocity-eiv", action="store_true",
-                   help="take a measured v as exact in the joint regression (by default its damping columns are "
-                   "corrected for the noise on v, which otherwise attenuates v^3 and leaks it into v)")
-    f.add_argument("--structured-noise", action=argparse.BooleanOptionalAction, default=None,
-                   help="where accelerations are estimated (x only, v only, x and v): take their noise for what it "
-                   "is (the differentiation filter's) and resolve the curvature at each well (default: on where x "
-                   "was integrated from v or the records are sweeps, off on steady sines and measured "
-                   "accelerations; results/derived_accelerations.md)")
+    f.add_argument("--coordination", choices=["evidence", "hermite", "gls"], default="evidence",
+                   help="GMR's global step: evidence (default: one posterior of every well's records; the law, its "
+                   "degree, its band and whether cells of one design share a law, all from the evidence), hermite "
+                   "(the paper's route: local STLS fits, then their exact Hermite interpolant), gls (the paper's "
+                   "route with a covariance-weighted least-squares coordination)")
     f.add_argument("--restoring-order", "-r", type=positive_int, default=5,
-                   help="highest power of x in each well's local restoring fit")
+                   help="hermite/gls: highest power of x in each well's local restoring fit")
     f.add_argument("--damping-order", "-d", type=positive_int, default=5,
-                   help="highest order of the local damping terms (sgn(v)|v|^j and x^j v)")
-    f.add_argument("--threshold", default="auto", help="STLS threshold on normalised coefficients, or 'auto' "
+                   help="highest order of the damping terms (sgn(v)|v|^j and x^j v)")
+    f.add_argument("--threshold", default="auto", help="hermite/gls: STLS threshold on normalised coefficients, or 'auto' "
                    "(blocked cross-validation, one-standard-error rule; default)")
     f.add_argument("--topology", default=None, metavar="chain|independent|GRAPH.json",
                    help="several DOFs: chain (cells in series, x_i the deformation of cell i; the default), "
@@ -151,16 +133,8 @@ def run(args) -> int:
         png = None  # the fit figure draws chains and independent DOFs
     if args.method == "gmr" and not isinstance(topology, gmr.Graph):
         kwargs["coordination"] = args.coordination
-        if args.no_shared_design:
-            kwargs["shared_design"] = False
-        if args.no_eiv:
-            kwargs["errors_in_variables"] = False
-        if args.no_velocity_eiv:
-            kwargs["velocity_eiv"] = False
-        if args.structured_noise is not None:
-            kwargs["structured_noise"] = args.structured_noise
         kwargs["progress"] = lambda msg: stage(f"gmr: {msg}")
-    stage(f"{args.method}: local fits and coordination (the first run of a shape compiles)")
+    stage(f"{args.method}: the global law (the first run of a shape compiles)")
     with warnings.catch_warnings():  # printed below as `warning:` lines, once each
         warnings.simplefilter("ignore", GMRDataWarning)
         sol = fn(recs, lib, topology=topology, masses=masses, **kwargs)
@@ -182,7 +156,7 @@ def run(args) -> int:
         save_with_pdf(fit_figure(model, recs, title=f"{st['method']} model ({Path(args.out).name}) against its "
                                  f"recordings", unit=unit), png)
         print(f"  figure: {png} (and .pdf): forces over the data ranges with their 95 % band, residuals")
-    print(f"  details (standard errors, what each well resolved, coordination): gmr show {args.out} --detail")
+    print(f"  details (standard errors, route, degree and design per DOF): gmr show {args.out} --detail")
     for w in st["warnings"]:  # the loading warnings were printed as the files were read
         print(f"warning: {short_warning(w).replace('gmr show MODEL', f'gmr show {args.out}')}", file=sys.stderr)
     n_warn = len(load_warnings) + len(st["warnings"])
@@ -207,13 +181,18 @@ def summary_lines(model, st, recs, out, unit, ranges, masses_given=False) -> lis
     graph = model.topology.name == "graph"
     what = "element" if graph else "DOF"
     for i in range(model.n_elements):
-        stable = [x for x, s in eqs[i] if s > 0]
-        saddles = [x for x, s in eqs[i] if s < 0]
+        lo, hi = ranges[i]
+        near = [(x, s) for x, s in eqs[i] if lo - 0.5 * (hi - lo) <= x <= hi + 0.5 * (hi - lo)]
+        stable = [x for x, s in near if s > 0]
+        saddles = [x for x, s in near if s < 0]
+        far = len(eqs[i]) - len(near)
         band = "" if model.covariance is None else (
             f"; restoring-force band ±{100 * restoring_uncertainty(model.stiffness[i], model.covariance[i], *ranges[i]):.2g} %")
         lines.append(f"  {what} {i}: stable wells at x = {', '.join(f'{x:.4g}' for x in stable) or 'none'}{lu}"
                      + (f", saddle{'s' if len(saddles) > 1 else ''} at {', '.join(f'{x:.4g}' for x in saddles)}{lu}"
-                        if saddles else "") + band)
+                        if saddles else "") + band
+                     + (f" ({far} more zero{'s' if far > 1 else ''} of the law beyond the recorded range by half its "
+                        f"width: extrapolation, not a prediction)" if far else ""))
     if graph:
         lines.append(f"  topology: graph of {model.n_dof} nodes and {model.n_elements} elements (x: an element's "
                      f"deformation, the displacement of its second node minus its first's)")

@@ -23,63 +23,19 @@ _KNOWN = ("format", "topology", "masses", "terms", "method", "library", "trainin
 
 
 def format_coordination(routes: list[dict]) -> list[str]:
-    """`gmr fit`/`gmr show`: per DOF, the coordination route and why (where the auto route said why)."""
+    """`gmr show --detail`: per DOF, the route, the restoring degree and the design it shares."""
     out = []
     for i, r in enumerate(routes):
         if not isinstance(r, dict):
             continue
-        notes = [str(n) for n in r.get("notes") or []]
-        out.append(f"    DOF {i}: {r.get('route', '?')}" + (":" if notes else ""))
-        out += [f"      - {n}" for n in notes]
-    return (["  coordination route per DOF:"] + out) if out else []
-
-
-def format_eiv(routes: list[dict]) -> list[str]:
-    """`gmr fit`/`gmr show`: per DOF whose local fits were corrected for the noise on x (errors in
-    variables; the `errors_in_variables` of its coordination entry), how loud that noise was; and
-    whose joint regression was corrected for the noise on a measured v (`velocity_noise`)."""
-    lines = []
-    for i, r in enumerate(routes):
-        wells = [w for w in ((r.get("errors_in_variables") or []) if isinstance(r, dict) else [])
-                 if isinstance(w, dict) and w.get("applied")]
-        if wells:
-            rel = [100 * float(w.get("of_vibration", float("nan"))) for w in wells]
-            lines.append(f"  DOF {i}: local fits corrected for the noise on x (errors in variables; its sd "
-                         f"{min(rel):.2g}-{max(rel):.2g} % of the vibration at {len(wells)} well(s); --no-eiv: "
-                         "plain least squares)")
-        vel = [w for w in ((r.get("velocity_noise") or []) if isinstance(r, dict) else [])
-               if isinstance(w, dict) and w.get("applied")]
-        if vel:
-            sd = [float(w.get("noise_sd", float("nan"))) for w in vel]
-            lines.append(f"  DOF {i}: joint regression's damping corrected for the noise on v (sd {min(sd):.3g}-"
-                         f"{max(sd):.3g} at {len(vel)} well(s); --no-velocity-eiv: v taken as exact)")
-    return lines
-
-
-def format_shared_design(design: list[dict]) -> list[str]:
-    """`gmr fit`/`gmr show`: which cells lent which restoring orders to which (cells of one design)."""
-    if not design:
-        return []
-    head = next((r for r in design if "tau" in r), {})  # a hand-edited file may lack it
-    tau = head.get("tau")
-    out = [f"  cells (DOFs) of one design: {head.get('cells')}, design spread tau "
-           f"{'n/a' if tau is None else f'{100 * float(tau):.2g} %'}"]
-    for i, r in enumerate(design):
-        borrowed = r.get("borrowed") or []
-        if r.get("used"):
-            per_well = "; ".join(f"well {k}: q^{', q^'.join(map(str, b))}" for k, b in enumerate(borrowed) if b)
-            degree = f"; global degree {r['degree']}" if "degree" in r else ""
-            out.append(f"    DOF {i}: borrowed {per_well}{degree}")  # why that degree: the coordination notes
-        elif r.get("why"):
-            out.append(f"    DOF {i}: on its own ({r['why']})")
-        law = r.get("law") if isinstance(r.get("law"), dict) else None
-        if law and "sd_after" in law:
-            tau_l = law.get("tau")
-            spread = "" if tau_l is None else f", laws {100 * float(tau_l):.2g} % apart"
-            out.append(f"    DOF {i}: law between the wells pooled with the design's (cells {law.get('cells')}{spread}): "
-                       f"sd {100 * float(law['sd_before']):.2g} -> {100 * float(law['sd_after']):.2g} % of "
-                       f"F'(well) x span, chi2 {float(law['chi2']):.2g} on {law.get('nodes')} nodes")
-    return out
+        line = f"    DOF {i}: {r.get('route', '?')}"
+        if r.get("degree", -1) >= 0:
+            line += f", restoring degree {r['degree']}"
+        if r.get("design"):
+            line += (f"; one design with DOFs {', '.join(map(str, r['design']))} (spread about the shared law "
+                     f"{100 * float(r.get('design_spread', float('nan'))):.2g} % of its scale)")
+        out.append(line)
+    return (["  global law per DOF:"] + out) if out else []
 
 
 def register(sub):
@@ -308,23 +264,12 @@ def _describe(model, d: dict, name: str, p: int, detail: bool = False) -> str:
     out += ["", f"Warnings stored with the model: {len(warns) or 'none'}"]
     out += [f"  - {w}" for w in warns]
     if not detail:
-        out += ["", "(what each well resolved, the coordination and the noise corrections: --detail)"]
+        out += ["", "(the route, degree and design of each DOF: --detail)"]
         return "\n".join(out)
-    res = d.get("resolution")
-    if isinstance(res, list) and res:
-        from .._reconstruct._resolution import format_resolution
-
-        out += ["", "What each well's data resolved (F, F', F'' needed at every well; NO = needed, unresolved):"]
-        out += format_resolution(res, detail=True)
     routes = d.get("coordination")
     if isinstance(routes, list) and routes:
-        out += ["", "Coordination (the route per DOF and why):"]
+        out += ["", "Global law (the route per DOF):"]
         out += format_coordination(routes)[1:]
-        out += format_eiv(routes)
-    design = d.get("shared_design")
-    if isinstance(design, list) and design:
-        out += ["", "Cells of one design (restoring orders lent as a prior to the weakly excited cells):"]
-        out += format_shared_design([r if isinstance(r, dict) else {} for r in design])
     extra = [k for k in d if k not in _KNOWN]
     if extra:
         out += ["", "Other keys:"]

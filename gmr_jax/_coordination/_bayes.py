@@ -15,10 +15,13 @@ carry independent noise. Each well w has its own noise variance s_w^2.
 Prior: a_k ~ N(0, s_F^2 rho_F^(2 max(k - q, 0))) with q = 2W - 1 for W wells: a law with W
 stable wells has at least 2W - 1 zeros, so the orders up to q are all expected, and beyond them
 the Chebyshev coefficients of a function analytic on a Bernstein ellipse fall geometrically;
-b_j ~ N(0, s_B^2 rho_B^(2|j-1|)) (viscous first),
-c_j ~ N(0, s_C^2 rho_C^(2(j-1))). The six scales and decays and the wells' noise variances
-maximise the log marginal likelihood (MacKay's evidence); the posterior mean and covariance
-then give the law, its standard errors and its band, one covariance for all three.
+b_j ~ N(0, s_bj^2), c_j ~ N(0, s_cj^2), each damping term with its own scale (automatic
+relevance determination, sparse Bayesian learning: a term the data do not need gets a scale
+near zero and drops out, so the law extrapolates beyond the recorded speeds with the terms the
+records hold, not with a smooth mixture of every power). The scales, the decay and the wells'
+noise variances maximise the log marginal likelihood (MacKay's evidence) times a wide
+hyperprior; the posterior mean and covariance then give the law, its standard errors and its
+band, one covariance for all three.
 """
 
 import math
@@ -169,18 +172,21 @@ def well_factors(rows, target, valid, well: Int[Array, " records"], n_wells: int
 
 
 class Hyper(eqx.Module):
-    """log scale and logit decay per family (3,), log noise variance per well (W,)."""
+    """log scale and logit decay of the restoring law's prior, log prior standard deviation of
+    every damping column (`Basis.sizes[1:]`), log noise variance per well (W,)."""
 
-    log_scale: Float[Array, " 3"]
-    logit_decay: Float[Array, " 3"]
+    log_scale: Float[Array, ""]
+    logit_decay: Float[Array, ""]
+    log_ard: Float[Array, " damping"]
     log_noise: Float[Array, " wells"]
 
 
 def prior_sd(h: Hyper, basis: Basis):
-    """The prior's standard deviation of every column, s_f rho_f^power."""
-    fam = jnp.asarray(basis.family())
-    power = jnp.asarray(basis.decay_power())
-    return jnp.exp(h.log_scale[fam] + power * jax.nn.log_sigmoid(h.logit_decay)[fam])
+    """The prior's standard deviation of every column: s rho^power for the restoring orders, each
+    damping column its own (automatic relevance determination)."""
+    power = jnp.asarray(basis.decay_power()[: basis.degree + 1])
+    restoring = jnp.exp(h.log_scale + power * jax.nn.log_sigmoid(h.logit_decay))
+    return jnp.concatenate([restoring, jnp.exp(h.log_ard)])
 
 
 def _gaussian(sq, X, t, logdet_noise, n):
@@ -205,20 +211,25 @@ def _covariance(chol, sq):
     return sq[:, None] * inv * sq[None, :]
 
 
+#: the smallest noise variance of the rows, relative to the target's mean square: rounding in the
+#: weak-form integrals is far below it, and noise-free records keep a finite evidence optimum
+NOISE_FLOOR = 1e-24
+
+
 def _weighted(F, log_noise):
-    """The wells' factors weighted by their noise precisions beta = exp(-log_noise): the
-    square-root rows X, t."""
-    root = jnp.exp(-0.5 * log_noise)
-    X = root[..., None, None] * F
-    return X[..., :-1], X[..., -1]
+    """The wells' factors weighted by their noise precisions beta = 1 / (exp(log_noise) +
+    `NOISE_FLOOR`): the square-root rows X, t, and log beta."""
+    log_beta = -jnp.logaddexp(log_noise, math.log(NOISE_FLOOR))
+    X = jnp.exp(0.5 * log_beta)[..., None, None] * F
+    return X[..., :-1], X[..., -1], log_beta
 
 
 def _solve(h: Hyper, stats, basis: Basis, active):
     F, n = stats
     sq = prior_sd(h, basis) * active  # inactive columns: zero prior variance
-    X, t = _weighted(F, h.log_noise)
+    X, t, log_beta = _weighted(F, h.log_noise)
     p = F.shape[-1]
-    mean, chol, log_ev = _gaussian(sq, X.reshape(-1, p - 1), t.reshape(-1), -jnp.sum(n * h.log_noise), jnp.sum(n))
+    mean, chol, log_ev = _gaussian(sq, X.reshape(-1, p - 1), t.reshape(-1), jnp.sum(n * log_beta), jnp.sum(n))
     return mean, chol, sq, log_ev
 
 
@@ -243,14 +254,16 @@ FLAT = 1e-3
 
 def log_hyperprior(h: Hyper):
     """log p(hyperparameters) up to a constant: independent normals on the log scales and the
-    logit decays (`HYPER_SD`), flat on the log noise variances."""
-    return -0.5 * (jnp.sum((h.log_scale / HYPER_SD[0]) ** 2) + jnp.sum((h.logit_decay / HYPER_SD[1]) ** 2))
+    logit decay (`HYPER_SD`), flat on the log noise variances."""
+    scales = jnp.append(h.log_ard, h.log_scale)
+    return -0.5 * (jnp.sum((scales / HYPER_SD[0]) ** 2) + (h.logit_decay / HYPER_SD[1]) ** 2)
 
 
-def _initial(stats, decay: float) -> Hyper:
+def _initial(stats, basis: Basis, decay: float) -> Hyper:
     F, n = stats
     var = jnp.sum(F[..., -1] ** 2, axis=-1) / jnp.maximum(n, 1.0)
-    return Hyper(jnp.zeros(3), jnp.full(3, jnp.log(decay / (1.0 - decay))), jnp.log(1e-2 * var + 1e-30))
+    return Hyper(jnp.zeros(()), jnp.asarray(math.log(decay / (1.0 - decay))), jnp.zeros(sum(basis.sizes[1:])),
+                 jnp.log(1e-2 * var + 1e-30))
 
 
 #: below this (in units of the target's RMS) a column's posterior mean and standard deviation are zero
@@ -298,7 +311,7 @@ def _optimise(stats, basis: Basis, active, max_steps: int):
         return -(log_evidence(h, args, basis, active) + log_hyperprior(h)) / jnp.maximum(jnp.sum(args[1]), 1.0)
 
     # two starts: the evidence can have a local optimum at either end
-    h, code = _minimise(loss, [_initial(stats, decay) for decay in (0.3, 0.7)], stats, max_steps)
+    h, code = _minimise(loss, [_initial(stats, basis, decay) for decay in (0.3, 0.7)], stats, max_steps)
     mean, chol, sq, log_ev = _solve(h, stats, basis, active)
     return h, mean, _covariance(chol, sq), log_ev + log_hyperprior(h), code._value
 
@@ -388,14 +401,14 @@ def _design_matrices(maps, damping: int):
 def _design_solve(d: Design, stats, maps, damping_sd, basis: Basis):
     F, n = stats  # (J, W, P + 1, P + 1), (J, W)
     E = _design_matrices(maps, damping_sd.shape[1])
-    X, t = _weighted(F, d.log_noise)
+    X, t, log_beta = _weighted(F, d.log_noise)
     X = jnp.einsum("jwrp,jpz->jwrz", X, E)
     power = jnp.asarray(basis.decay_power()[: basis.degree + 1])
     shape = jnp.exp(power * jax.nn.log_sigmoid(d.logit_decay))
     own = jnp.exp(power[None, :] * jax.nn.log_sigmoid(d.logit_spread_decay)[:, None])
     member = jnp.concatenate([jnp.exp(d.log_spread)[:, None] * own, damping_sd], axis=1)
     sq = jnp.concatenate([jnp.exp(d.log_scale) * shape, member.reshape(-1)])
-    mean, chol, log_ev = _gaussian(sq, X.reshape(-1, X.shape[-1]), t.reshape(-1), -jnp.sum(n * d.log_noise),
+    mean, chol, log_ev = _gaussian(sq, X.reshape(-1, X.shape[-1]), t.reshape(-1), jnp.sum(n * log_beta),
                                    jnp.sum(n))
     return E, mean, chol, sq, log_ev
 

@@ -169,7 +169,7 @@ def sign_certain(rows: Rows, rec, dof: int) -> Rows:
     (integrals over windows) and an estimated v (its noise is not white) are otherwise returned as they are, but
     for the stick rows."""
     from .._recordings._derivatives import auto_window
-    from .._reconstruct._noise import white_floor
+    from .._recordings._noise import white_floor
 
     if rows.v is None:
         return rows

@@ -1,10 +1,7 @@
 """What a fitted model's file carries beside its coefficients, read from the `Solution` of
 `reconstruct` / `gmc_sindy`: one definition for `save_model(solution, ...)` and `gmr fit`, so a
 model saved from Python holds what the command line writes (the method, library orders, training
-scores, warnings, the data and speed ranges, the resolution report, the coordination route and
-the shared design)."""
-
-import json
+scores, warnings, the data and speed ranges, and per DOF the route, degree and design)."""
 
 import numpy as np
 
@@ -22,29 +19,18 @@ def ranges(recordings, key: str) -> list[list[float]]:
     return [[float(a[:, i].min()), float(a[:, i].max())] for i in range(a.shape[1])]
 
 
-def shared_design_of(stats: dict) -> list[dict]:
-    """Per DOF, `reconstruct`'s `stats["shared_design"]` (JSON-ready), or [] where the fit had none
-    (a single DOF, GMC-SINDy, or sharing off)."""
-    rows = [rep.stats.get("shared_design") for rep in stats.get("dofs", [])]
-    if not rows or not any(isinstance(r, dict) and "tau" in r for r in rows):
-        return []
-    return [json.loads(json.dumps(r, default=float)) if isinstance(r, dict) else {} for r in rows]
-
-
 def coordination_of(stats: dict) -> list[dict]:
-    """Per DOF, the coordination route `reconstruct` took (auto: "gls", "joint", "gls + joint
-    damping") and its notes (why the paper's route was replaced or kept, or its degree changed),
-    JSON-ready; [] where the fit has none (GMC-SINDy)."""
+    """Per DOF, how `reconstruct` found the global law, JSON-ready: the route ("evidence",
+    "hermite", "gls"), the restoring degree, and on the evidence route the DOFs that share its
+    design with its spread about the shared law; [] where the fit has none (GMC-SINDy)."""
     rows = []
     for rep in stats.get("dofs", []):
-        route = rep.stats.get("coordination") if isinstance(rep.stats, dict) else None
-        if route is None:
+        st = rep.stats if isinstance(rep.stats, dict) else {}
+        if st.get("coordination") is None:
             return []
-        row = {"route": str(route), "notes": [str(n) for n in rep.stats.get("paper_route_rejected", [])]}
-        if any(rep.stats.get("errors_in_variables") or []):
-            row["errors_in_variables"] = rep.stats["errors_in_variables"]
-        if any(w and w.get("applied") for w in rep.stats.get("velocity_noise") or []):
-            row["velocity_noise"] = rep.stats["velocity_noise"]
+        row = {"route": str(st["coordination"]), "degree": int(st.get("degree", st.get("K_r", -1)))}
+        if "design" in st:
+            row |= {"design": [int(k) for k in st["design"]], "design_spread": float(st["design_spread"])}
         rows.append(row)
     return rows
 
@@ -62,11 +48,6 @@ def fit_metadata(stats: dict) -> dict:
             meta[key] = stats[key]
     if "warnings" in stats:
         meta["warnings"] = list(stats["warnings"])
-    if "resolution" in stats and hasattr(stats["resolution"], "to_dict"):
-        meta["resolution"] = stats["resolution"].to_dict()  # gmr show prints it
-    design = shared_design_of(stats)
-    if design:
-        meta["shared_design"] = design
     routes = coordination_of(stats)
     if routes:
         meta["coordination"] = routes

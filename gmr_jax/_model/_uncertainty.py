@@ -83,11 +83,10 @@ def force_band(
     **Returns:** a `ForceBand` of (dof,) arrays. Jittable, vmappable and differentiable in `x`,
     `v` and the model's coefficients.
 
-    What the covariance of a reconstructed model holds (`reconstruct`): the local fits'
-    covariances propagated through the coordination (exact: it is linear in the local
-    coefficients), scaled by the coordination's chi-squared per degree of freedom where that
-    exceeds 1, plus a model-discrepancy term for what the local data do not fix between the
-    wells (`coordination_discrepancy`): the band widens between the wells and beyond them.
+    What the covariance of a reconstructed model holds (`reconstruct`): on the default route, the
+    posterior covariance of the global law (the same one its standard errors come from), which
+    widens between and beyond the wells where the records do not fix the law; on the paper's
+    route, the local fits' covariances propagated through the coordination.
 
     Examples:
         >>> import jax, jax.numpy as jnp

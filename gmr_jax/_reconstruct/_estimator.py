@@ -182,6 +182,7 @@ def estimate(recs, masses, topology, settings: ReconstructSettings, wells, say, 
             "degree": int(np.argmax(np.asarray(post.weight))) + 1,
             "prior_scale": np.exp(np.asarray(h.log_scale)).tolist(),
             "prior_decay": np.asarray(jax.nn.sigmoid(h.logit_decay)).tolist(),
+            "damping_prior_sd": np.exp(np.asarray(h.log_ard)).tolist(),
             "noise_sd": np.exp(0.5 * np.asarray(h.log_noise)).tolist(),
             "resolution": (np.abs(np.asarray(post.mean)) / np.maximum(sd, 1e-300)).tolist(),
         })

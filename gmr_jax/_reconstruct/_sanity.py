@@ -19,9 +19,7 @@ from itertools import pairwise
 import numpy as np
 
 from .._errors import GMRDataWarning as GMRDataWarning  # noqa: F401  (re-exported)
-from .._coordination._joint import fall_speed
 from .._errors import GMRInputError
-from .._fit._library import damping_columns
 
 
 #: Percentile of |x - mean| taken as a recording's vibration amplitude (robust to a few spikes).
@@ -651,52 +649,8 @@ def check_fit_quality(training: dict) -> list[str]:
 MAX_RESTORING_UNCERTAINTY = 0.02
 
 
-def check_determination(dof: int, stiffness, covariance, x_lo: float, x_hi: float) -> list[str]:
-    """Rule 11: how well the data determine the global restoring force. The coordination's
-    covariance of the restoring coefficients (propagated from the local fits' standard
-    errors) gives a standard error of F_r(x); its RMS over the recorded range [x_lo, x_hi],
-    relative to the RMS of F_r, is the force's relative uncertainty. Above
-    `MAX_RESTORING_UNCERTAINTY` (2 sd > 2 %) the model is warned about. Measured
-    (`studies/noise_robustness.py`, 3 seeds): the actual error was within 3.5 sd on every
-    run of the joint and the NES at 20-60 dB; the clean built-in cases have 2 sd <= 0.11 %;
-    the NES at 30 dB / 20 dB, seed 0 (6.2 % / 21 % error) have 2 sd = 3.6 % / 13 %. The
-    local standard errors take measured accelerations' residuals as white, and estimated ones'
-    noise with its filter's structure (`_fit/_target_noise.py`).
-
-    `stiffness`: (K,) global restoring coefficients; `covariance`: their (K, K) covariance."""
-    rel = restoring_uncertainty(stiffness, covariance, x_lo, x_hi)
-    if rel <= MAX_RESTORING_UNCERTAINTY:
-        return []
-    return [f"DOF {dof}: the data determine the global restoring force only to ±{100 * rel:.2g} % (two "
-            f"standard errors, RMS over the recorded range [{_g(x_lo)}, {_g(x_hi)}]); more excitation, "
-            f"longer records or less noise would tighten it"]
-
-
 #: rule 11b: the band written with the model (its restoring part, as rule 11 measures it) above this share
 MAX_BAND = 0.10
-
-
-def check_band(dof: int, stiffness, calibrated, noise: float, x_lo: float, x_hi: float) -> list[str]:
-    """Rule 11b: the model file's band on the restoring force (`calibrated`: the covariance written
-    with the model, which adds the discrepancy between the laws the wells' data admit, `_discrepancy`)
-    where it is above `MAX_BAND` and twice the noise's alone (`noise`, rule 11's measure): a law the
-    noise pins down can still be one of many that pass through the wells' data (a hand-made truss law,
-    one sine per well, 40 dB: noise ±1.9 %, the written band ±236 %, the law 38 % off between the wells,
-    and no warning before). Not at rule 11's 2 %: the band is conservative on the paper's joint (40 dB,
-    seeds 0/1: ±7.2/2.2 % for errors of 0.012/0.025 %; 30 dB: ±23/7.1 % for 0.04/0.13 %), where a
-    warning at 2 % would call good models undetermined; at 10 % the 30 dB seed 0 is still warned."""
-    wide = restoring_uncertainty(stiffness, calibrated, x_lo, x_hi)
-    if wide <= max(MAX_BAND, 2.0 * noise):
-        return []
-    return [f"DOF {dof}: the model's band on the restoring force (the covariance written with it) is "
-            f"±{100 * wide:.2g} % (two standard deviations, RMS over the recorded range [{_g(x_lo)}, "
-            f"{_g(x_hi)}]), against ±{100 * noise:.2g} % from the data's noise alone (the printed standard "
-            f"errors): laws that differ that much between the wells fit the wells' data, so treat the force "
-            f"between them, the saddle and the barriers as uncertain to that extent (the band is built to "
-            f"cover: on the built-in stress cases it is 6-60 x the actual error); the fit figure draws it and "
-            f"gmr show gives the barriers' range. Data between the wells narrow it (a record that crosses, "
-            f"refined with gmr refine --free stiffness); larger vibrations about the wells may not (a tanh law "
-            f"from accelerations: ±260 % at 1, 3 and 5 x the amplitude)"]
 
 
 def restoring_uncertainty(stiffness, covariance, x_lo: float, x_hi: float) -> float:
@@ -710,33 +664,6 @@ def restoring_uncertainty(stiffness, covariance, x_lo: float, x_hi: float) -> fl
     f = phi @ k
     sd = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", phi, c, phi), 0.0, None))
     return float(2.0 * np.linalg.norm(sd) / max(np.linalg.norm(f), 1e-300))
-
-
-def check_significance(dof: int, wells, term_names, coef, stderr, exempt=None) -> list[str]:
-    """Rule 8: a local term kept by STLS should be significant: |coefficient| >= `MIN_T` (2)
-    standard errors. The Hermite coordination takes every local coefficient as exact, so an
-    insignificant high-order term raises the global degree and distorts the model.
-    `reconstruct`'s default `screen_sigma=3` already drops terms below 3 standard errors
-    (clean data: smallest kept ratio 3.06), so this fires only with the screen lowered or off
-    (the NES with `screen_sigma=None`: x v kept at 0.1-1.1 standard errors in every well).
-
-    `wells`: per well, a label (its recordings); `coef`, `stderr`: (wells, terms); `exempt`
-    (wells, terms): terms kept on purpose whatever their t (the screen keeps a restoring order
-    under a resolved higher one: its zero would be taken as exact, its covariance carries it)."""
-    out = []
-    coef, se = np.asarray(coef, float), np.asarray(stderr, float)
-    exempt = np.zeros(coef.shape, bool) if exempt is None else np.asarray(exempt, bool)
-    for k, label in enumerate(wells):
-        bad = [(term_names[j], coef[k, j], se[k, j]) for j in range(coef.shape[1])
-               if coef[k, j] != 0 and np.isfinite(se[k, j]) and abs(coef[k, j]) < MIN_T * se[k, j]
-               and not exempt[k, j]]
-        if bad:
-            out.append(
-                f"DOF {dof}, well of {label}: kept term(s) not significant (below {MIN_T:g} standard errors): "
-                + ", ".join(f"{n} = {_g(c)} ± {_g(s)}" for n, c, s in bad)
-                + "; they may distort the global model: keep the default screen (screen_sigma=3) or lower the orders"
-            )
-    return out
 
 
 def _potential_and_roots(stiffness, centre, half):
@@ -780,30 +707,6 @@ def escapes(stiffness, equilibria) -> list[dict]:
     for side, _, x_w, x_e in _outward_sides(s, eq, roots):
         path = np.linspace(x_w, x_e, 401)
         out.append({"side": side, "x": x_e, "barrier": float(np.max(pot(path)) - pot(x_w))})
-    return out
-
-
-def reachable_escapes(stiffness, equilibria, energy: float) -> list[dict]:
-    """The `escapes` whose barrier lies below `energy` (the bound the model is used on): the
-    outward turns its motions can reach."""
-    return [e for e in escapes(np.asarray(stiffness), np.asarray(equilibria)) if e["barrier"] < energy]
-
-
-def check_escape_reach(dof: int, stiffness, equilibria, energy: float) -> list[str]:
-    """Rule 9 (d), for a coordination kept although its restoring force turns outward and no
-    redundant local datum confirms that shape (the exact interpolant of the wells' Taylor
-    coefficients, extrapolated): warn where a motion with energy up to `energy` (the bound the
-    model is used on, 1/2 m v_max^2 of `_reconstruct._speed`) gets past the escape point."""
-    out = []
-    for e in reachable_escapes(stiffness, equilibria, energy):
-        out.append(
-            f"DOF {dof}: the restoring force turns outward beyond x = {_g(e['x'])} (F -> "
-            f"{'-' if e['side'] == '+' else '+'}inf as x -> {e['side']}inf) and a motion with energy "
-            f"{_g(e['barrier'])} above its outer well gets there and runs away, below the energies the model is "
-            f"used on (up to {_g(energy)}); no recorded datum confirms that shape (the global law interpolates the "
-            f"wells' local terms exactly) and no admissible alternative explains every well's data as well: do "
-            f"not trust simulations that leave the recorded range; lower the orders, or record further out"
-        )
     return out
 
 
@@ -892,134 +795,11 @@ def blowup(stiffness, equilibria, local_stiffness) -> dict | None:
 CONFLICT_BAND_RATIO = 2.0
 
 
-def check_conflict(dof: int, stiffness, covariance, difference, conflict: float, x_lo: float, x_hi: float) -> list[str]:
-    """Rule 12: prior-data conflict of the joint coordination (`_joint.CONFLICT`): the data reject every
-    law the admissibility rules allow (confining, 2n - 1 sign changes, dissipative) by `conflict`
-    (-2 log evidence), and the law they prefer differs from the chosen one by `difference` (restoring
-    coefficients, the chosen law's `stiffness` with its covariance before that discrepancy was added).
-    Warn where the difference exceeds `CONFLICT_BAND_RATIO` times the chosen law's 95 % half-band
-    somewhere on the recorded range [x_lo, x_hi]: the data cannot decide the law there. Magnetic
-    oscillator at 0.05 (a record that hops between the wells, its mean taken as a well), 40 dB,
-    seed 1: the chosen law 19 % off on the span with a 0.5 % band, the preferred one 0.8 % off."""
-    k, c = np.asarray(stiffness, float), np.asarray(covariance, float)
-    dif = np.asarray(difference, float)[: k.size]
-    if not (np.any(dif != 0) and np.all(np.isfinite(c)) and np.isfinite(x_lo) and np.isfinite(x_hi) and x_hi > x_lo):
-        return []
-    phi = np.polynomial.polynomial.polyvander(np.linspace(x_lo, x_hi, 401), k.size - 1)
-    f, d = phi @ k, phi @ dif
-    half = 1.96 * np.sqrt(np.clip(np.einsum("ij,jk,ik->i", phi, c, phi), 0.0, None))
-    ratio = np.abs(d) / np.maximum(half, 1e-300)
-    if not np.max(ratio) > CONFLICT_BAND_RATIO:
-        return []
-    i = int(np.argmax(np.abs(d)))
-    return [
-        f"DOF {dof}: the data cannot decide the global restoring force: they reject every admissible law "
-        f"(confining, with only the recorded wells and the saddles between them) by {conflict:.3g} in -2 log "
-        f"evidence, and the law they prefer (not admissible beyond the data) differs from the chosen one by up to "
-        f"{100 * abs(d[i]) / max(float(np.max(np.abs(f))), 1e-300):.2g} % of the force over the recorded range "
-        f"[{_g(x_lo)}, {_g(x_hi)}] (at x = {_g(float(phi[i, 1]))}), {np.max(ratio):.3g} times its 95 % band; the "
-        f"model's covariance includes that difference, so its bands and samples are wide. Typical cause: records "
-        f"that are not small vibrations about one well each (a record that hops between wells, its mean taken "
-        f"as a well); record small vibrations about each stable equilibrium, or lower the excitation"
-    ]
-
-
-def crossing_speed(stiffness, equilibria, mass: float) -> float:
-    """The speed of a fall from the highest point of the potential V = int F dx between the outermost wells to the
-    lowest well, sqrt(2 (max V - min V_well) / m): what a crossing between wells reaches without forcing (0 for
-    fewer than two wells)."""
-    eq = np.sort(np.asarray(equilibria, float))
-    return 0.0 if eq.size < 2 else fall_speed(stiffness, eq, mass, eq[0], eq[-1], 801)
-
-
-def check_unresolved_damping(dof: int, velocity_damping, position_damping, found: dict, recorded_speed: float,
-                             speed: float, x_lo: float, x_hi: float) -> list[str]:
-    """Rule 14b: a velocity term no well kept (`_damping_orders.unresolved_orders`: order j, its pooled refitted
-    coefficient c_j +- s_j, the alternative law's difference `delta`) whose law parts from the model's by more than
-    `DAMPING_SPREAD` of the model's largest damping force (|delta . phi| + 2 s_j |v|^j) over the span [x_lo, x_hi]
-    at some |v| below `speed` (`crossing_speed`: a fall from the highest barrier to the lowest well), where that
-    speed is beyond twice the recorded one: the paper route's counterpart of rule 14. One message for the orders
-    that matter. Audit (tri-stable quintic, true 2 v^3 beside (0.2 + 1400 x^2) v, x v a at 60 dB, records at
-    |v| <= 0.04): v^3 dropped at every well, the damping at |v| = 0.4 2.6 x too low with a band of +-0.3 %, no
-    warning."""
-    if not found or not speed > 2.0 * recorded_speed or not (np.isfinite(x_lo) and np.isfinite(x_hi)):
-        return []
-    b, c = np.asarray(velocity_damping, float), np.asarray(position_damping, float)
-    xs = np.linspace(x_lo, x_hi, 21)[:, None]
-    vs = np.linspace(0.0, speed, 401)[None, 1:]
-    d0 = np.max(np.abs(damping_columns(xs, vs, b.size, c.size) @ np.concatenate([b, c])), axis=0)  # per speed
-    names = {2: "v|v|", 3: "v^3"}
-    parts = []
-    for j, (cj, sj, n, delta, replaced, *_) in sorted(found.items()):
-        alt = np.abs(damping_columns(xs, vs, delta.size, 0) @ np.asarray(delta, float))
-        part = np.max(alt, axis=0) + 2.0 * sj * vs[0] ** j > DAMPING_SPREAD * np.maximum(d0, 1e-300)
-        if part.any():
-            shown = f", {abs(cj) / sj:.1f} standard errors from 0: the records show it" if abs(cj) > 2.0 * sj else ""
-            instead = (f" in place of {', '.join(names.get(o, f'sgn(v)|v|^{o}') for o in replaced)}" if replaced
-                       else " added")
-            parts.append((float(vs[0, int(np.argmax(part))]), f"{names.get(j, f'|v|^{j}')}{instead} ({cj:.3g} +- "
-                                                               f"{sj:.2g} refitted at {n} well{'s' if n > 1 else ''}"
-                                                               f"{shown})"))
-    if not parts:
-        return []
-    v_part = min(p[0] for p in parts)
-    return [
-        f"DOF {dof}: the records do not decide the damping at the speeds of a crossing between wells: they reach |v| "
-        f"= {_g(recorded_speed)}, a fall from the highest barrier to the lowest well {_g(speed)}, and the wells' "
-        f"velocity law refitted with {' or with '.join(p[1] for p in parts)} parts from the model's by more than "
-        f"{100 * DAMPING_SPREAD:g} % of its damping force above |v| = {_g(v_part)} (the model's 95 % band holds that "
-        f"alternative); simulations, hops and basins faster than that inherit the threshold's choice. Record faster "
-        f"motion (larger vibrations) to decide it"]
-
-
 #: Rule 14: the data cannot decide the damping law where another set of velocity terms scores within this of the
 #: chosen one (-2 log evidence; "very strong" evidence on Kass and Raftery's scale decides, as `_joint.CONFLICT`)
 DAMPING_UNDECIDED = 10.0
 #: ... and the two laws' damping forces part by more than this share below the model's speed bound
 DAMPING_SPREAD = 0.25
-
-
-def check_damping_choice(dof: int, velocity_damping, position_damping, alt_velocity, alt_position, orders,
-                         delta: float, recorded_speed: float, speed: float, x_lo: float, x_hi: float) -> list[str]:
-    """Rule 14: the damping law chosen by the joint regression (`velocity_damping` B_j of sgn(v)|v|^j,
-    `position_damping` C_j of x^j v) against the best admissible law of another set of velocity terms (`orders`,
-    the difference `alt_velocity`, `alt_position`, its score `delta` worse): where the data do not decide between
-    them (`delta` < `DAMPING_UNDECIDED`) and the model is meant for speeds (`speed`, its bound) beyond twice the
-    recorded ones (`recorded_speed`), warn if their damping forces part by more than `DAMPING_SPREAD` below
-    `speed`, and say from which speed. Single-tone arch, x only, 50 dB, seed 1: records at |v| <= 0.21, linear
-    damping chosen, v^3 8.9 worse (parting above |v| = 0.58); at |v| = 3 the truth damps 0.99, the model 0.56:
-    the one-period NRMSE of a cross-well record 16 %, 5 % with the truth's damping."""
-    b, c = np.asarray(velocity_damping, float), np.asarray(position_damping, float)
-    db, dc = np.asarray(alt_velocity, float), np.asarray(alt_position, float)
-    if orders is None or not np.isfinite(delta) or delta >= DAMPING_UNDECIDED or not speed > 2.0 * recorded_speed:
-        return []
-    n_b, n_c = max(b.size, db.size), max(c.size, dc.size)
-    b, db = np.pad(b, (0, n_b - b.size)), np.pad(db, (0, n_b - db.size))
-    c, dc = np.pad(c, (0, n_c - c.size)), np.pad(dc, (0, n_c - dc.size))
-    if not (np.all(np.isfinite(b + db)) and np.all(np.isfinite(c + dc)) and np.isfinite(x_lo) and np.isfinite(x_hi)):
-        return []
-    xs = np.linspace(x_lo, x_hi, 21)[:, None]
-    vs = np.linspace(0.0, speed, 401)[None, 1:]
-
-    def force(bb, cc):  # (x, v) grid, v > 0
-        return damping_columns(xs, vs, n_b, n_c) @ np.concatenate([bb, cc])
-
-    d0, d1 = force(b, c), force(b + db, c + dc)
-    part = np.max(np.abs(d1 - d0) / np.maximum(np.abs(d0), 1e-300), axis=0) > DAMPING_SPREAD
-    if not part.any():
-        return []
-    v_part = float(vs[0, int(np.argmax(part))])
-    ratio = float(np.max(np.abs(d1[:, -1]))) / max(float(np.max(np.abs(d0[:, -1]))), 1e-300)
-    names = {0: "sgn(v)", 2: "v|v|", 3: "v^3"}
-    terms = ", ".join(names.get(int(o), f"sgn(v)|v|^{int(o)}") for o in orders) or "the viscous term alone"
-    return [
-        f"DOF {dof}: the records do not decide the damping law at the speeds the model is meant for: they reach "
-        f"|v| = {_g(recorded_speed)}, the model's speed bound is {_g(speed)}, and a law with {terms} (scored "
-        f"{abs(delta):.2g} {'worse' if delta >= 0 else 'better'} in -2 log evidence, within {DAMPING_UNDECIDED:g}) "
-        f"parts from the chosen one by more than {100 * DAMPING_SPREAD:g} % above |v| = {_g(v_part)} ({ratio:.2g} "
-        f"times its force at the bound); simulations, hops and basins faster than that inherit the choice. Record "
-        f"faster motion (larger vibrations, or a record nearer the cross-well speeds) to decide it"
-    ]
 
 
 #: `check_force_units`: a measured force that balances this many times more, or less, inertia than the masses and

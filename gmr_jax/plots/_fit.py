@@ -5,7 +5,6 @@ from matplotlib.figure import Figure
 
 from .._model._predict import forces
 from .._recordings._recording import regression_targets
-from .._reconstruct._slow import restore_slow
 from .._recordings._integrate import remove_drift
 
 #: one colour, line style and marker per recording (well), reused in every panel: lines that coincide or print in
@@ -97,10 +96,8 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
         force_unit = f"mass x {unit}/s²"
     vu = f" [{unit}/s]" if unit else f" ({x_unit}/s)"
     masses = np.asarray(model.masses, float)
-    # an x integrated from v or a: the slow shift its drift removal took, restored as `reconstruct` restores it
     recs = [r.complete(model.topology) for r in recordings]
     targets = [regression_targets(r, masses, model.topology) for r in recs]  # from a and the inputs, not x
-    recs = [restore_slow(r, y) for r, y in zip(recs, targets)]
     auto = isinstance(band, str) and band == "auto"
     band = _model_band(model) if auto else band
     damping_band = _damping_band(model) if auto else None
@@ -165,8 +162,7 @@ def fit_figure(model, recordings, path=None, *, title: str = "", x_unit: str = "
             y = targets[k][:, i]
             fr_, fd_ = forces(model, r.x, r.v, parts=True)
             res = y - (fr_ + fd_)[:, i]
-            # an x integrated from v or a lost its content below the drift cut-off, and the fit leaves that band out
-            # (`_reconstruct/_slow.band_rows`): so does the residual shown (else it wanders with the slow shift)
+            # an x integrated from v or a lost its content below the drift cut-off: so does the residual shown
             cuts = (r.integration or {}).get("f_highpass_hz") if "x" in r.derived else None
             cut = float(cuts[i]) if cuts is not None and len(cuts) > i and cuts[i] else None
             if cut is not None:
