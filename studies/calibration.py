@@ -1,6 +1,6 @@
-"""Calibration of the 95 % band and of the printed standard errors, both routes side by side:
-`reconstruct`'s default (`coordination="auto"`) and the one-posterior estimator
-(`coordination="evidence"`), on the same records.
+"""Calibration of the 95 % band and of the printed standard errors, routes side by side on the
+same records: `reconstruct`'s default (`coordination="evidence"`, one posterior of every well's
+records) and the paper's route (`coordination="gls"`: local STLS fits, then the coordination).
 
 Runs (system, sensors, SNR, seed): the coverage study's 20 (`studies/coverage.py`), and new ones:
 displacement-only and (x, a) sensors, Kresling chains on other seeds and noise levels, cubic
@@ -15,7 +15,7 @@ two designs. Per DOF:
 
 Targets: cover >= 90 % in >= 90 % of the DOFs; median sharp <= 4; coef >= 95 %.
 
-Run: python studies/calibration.py [--quick] [--routes auto evidence] [--out results/calibration.md]
+Run: python studies/calibration.py [--quick] [--routes evidence gls] [--out results/calibration.md]
 """
 
 import argparse
@@ -163,7 +163,7 @@ def summary(rows, route):
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true")
-    p.add_argument("--routes", nargs="+", default=["auto", "evidence"])
+    p.add_argument("--routes", nargs="+", default=["evidence", "gls"])
     p.add_argument("--out", default=None)
     args = p.parse_args()
     cmd = "python studies/calibration.py" + " ".join([""] + sys.argv[1:])
@@ -177,7 +177,7 @@ def main():
         rows += got
     runs = len({(r["case"], r["snr"], r["seed"]) for r in rows})
     f = lambda v, fmt: "-" if v is None else fmt.format(v)  # noqa: E731
-    lines = ["# Calibration of the band and the standard errors, default and one-posterior routes", "",
+    lines = ["# Calibration of the band and the standard errors, default and paper routes", "",
              f"Command: `{cmd}` ({time.time() - t0:.0f} s; definitions in the module docstring). {runs} runs, "
              f"{len(rows)} DOFs; each cell: " + " / ".join(args.routes) + ".", "",
              "## Summary", "",

@@ -134,3 +134,17 @@ def test_layer_check_catches_each_import_form():
         found = _imported_modules(path, line)
         assert any(m == "gmr_jax._reconstruct" or m.startswith("gmr_jax._reconstruct.") for m in found), line
     assert not any("_reconstruct" in m for m in _imported_modules(path, "from .._fit._library import Library"))
+
+
+def test_every_decision_of_the_reconstruction_is_listed_where_it_lives():
+    """docs/explanation/decisions.md names, per decision, the module and the functions that make it:
+    each exists, and the table stays within twelve decisions."""
+    rows = [line.split("|")[1:-1] for line in (ROOT / "docs/explanation/decisions.md").read_text().splitlines()
+            if line.startswith("| ") and line.split("|")[1].strip().isdigit()]
+    assert 0 < len(rows) <= 12
+    for row in rows:
+        path, names = row[-1].strip().strip("`").split(": ")
+        module = importlib.import_module("gmr_jax." + path.removesuffix(".py").replace("/", "."))
+        for name in names.split(", "):
+            assert hasattr(module, name), f"{path} has no {name}"
+    assert len(gmr_jax.reconstruct.__doc__.splitlines()) <= 40
