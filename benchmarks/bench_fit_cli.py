@@ -111,10 +111,10 @@ def main():
         "time much less; on a quiet machine a mostly single-threaded run's wall time is about its CPU time.",
         "",
         f"Data: two recordings of the bistable joint (5 deg, 60 dB, {n} samples each, NPZ). `gmr fit` runs "
-        "the default reconstruction (threshold by cross-validation, auto coordination, calibrated covariance, "
-        "sanity checks, resolution report), writes the model and its figure (PNG and PDF); the pysindy script "
-        "fits PolynomialLibrary(5) on (x, v) with STLSQ(0.05) to each file (the two local fits only: no "
-        "coordination, no threshold search, no figure).",
+        "the default reconstruction (one posterior of both wells' records, its hyperparameters and degree by the "
+        "evidence, the covariance, the sanity checks), writes the model and its figure (PNG and PDF); the pysindy "
+        "script fits PolynomialLibrary(5) on (x, v) with STLSQ(0.05) to each file (the two local fits only: no "
+        "global law, no threshold search, no figure).",
         "",
         "| run | wall time (s) | CPU time (s) |",
         "|---|---:|---:|",

@@ -35,7 +35,7 @@ import pysindy as ps  # noqa: E402
 import gmr_jax as g  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
-# the default solver of `reconstruct`; threshold replaced per case; alpha 0, normalised, unbiased
+# the local fits' solver of `reconstruct`'s paper route; threshold replaced per case; alpha 0, normalised, unbiased
 SOLVER = g.STLS(threshold=0.1, alpha=0.0, normalize_columns=True, unbias=True)
 LIB = g.Library(5, 5)
 

@@ -5,7 +5,8 @@ span, and how wide is it?
 Cases: the paper systems (bistable joint, tri-stable NES), polynomial chains (2 and 3 cubic
 cells), Kresling truss chains (3 and 5 cells), non-polynomial truths (shallow arch, magnetic
 oscillator), white noise at 30-60 dB on every channel, several seeds; `reconstruct` with its
-DEFAULTS (the library orders of each system, `system.orders["gmr"]`, as the other studies).
+DEFAULTS (the library orders of each system, `system.orders["gmr"]`, as the other studies), or
+the route `--coordination` names (the paper's "hermite" or "gls").
 
 Per DOF (cell):
 - interwell span: from the outermost stable equilibrium of the truth to the other (the
@@ -20,9 +21,9 @@ Per DOF (cell):
   band of F_d holds the true damping force (points with v = 0 excluded: the band and the
   truth are both 0 there).
 
-Run: python studies/coverage.py [--quick] [--basins]  (writes results/coverage.md; --quick: a
-reduced set of cases, written to results/coverage_quick.md; --basins: adds the basin
-probability demonstration on the bistable joint)
+Run: python studies/coverage.py [--quick] [--basins] [--coordination evidence|hermite|gls]
+(writes results/coverage.md; --quick: a reduced set of cases, written to results/coverage_quick.md;
+--basins: adds the basin probability demonstration on the bistable joint)
 """
 
 import argparse
@@ -133,7 +134,7 @@ def damping_band(model, system, i: int, level: float = LEVEL) -> tuple[float, fl
     return band.share, band.width
 
 
-#: extra `reconstruct` keywords (`--no-velocity-eiv`)
+#: extra `reconstruct` keywords (`--coordination`)
 OPTIONS: dict = {}
 
 
@@ -163,7 +164,7 @@ def basin_demo(lines, n_samples=8, grid=20):
     recs = g.systems.make_recordings(system, np.deg2rad(1.0), snr_db=30.0, seed=2)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        model = g.reconstruct(recs, g.Library(*system.orders["gmr"])).value
+        model = g.reconstruct(recs, g.Library(*system.orders["gmr"]), **OPTIONS).value
     f = np.linspace(0.5, 6.0, grid)
     A = np.linspace(500.0, 4000.0, grid)
     t0 = time.time()
@@ -200,15 +201,10 @@ def main():
     p.add_argument("--quick", action="store_true")
     p.add_argument("--basins", action="store_true")
     p.add_argument("--out", default=None)
-    p.add_argument("--no-velocity-eiv", action="store_true",
-                   help="reconstruct(velocity_eiv=False): a measured v taken as exact (the default before stop 46)")
-    p.add_argument("--coordination", default=None,
-                   help="reconstruct(coordination=...): e.g. 'evidence', the one-posterior estimator")
+    p.add_argument("--coordination", default="evidence", choices=["evidence", "hermite", "gls"],
+                   help="reconstruct(coordination=...): evidence (the default) or the paper's route")
     args = p.parse_args()
-    if args.coordination:
-        OPTIONS["coordination"] = args.coordination
-    if args.no_velocity_eiv:
-        OPTIONS["velocity_eiv"] = False
+    OPTIONS["coordination"] = args.coordination
     cases = [CASES[k] for k in QUICK] if args.quick else CASES
     out = Path(args.out or RESULTS / ("coverage_quick.md" if args.quick else "coverage.md"))
     cmd = "python studies/coverage.py" + " ".join([""] + sys.argv[1:])
@@ -220,7 +216,7 @@ def main():
         rows += got
     lines = [
         "# Coverage of the global model's 95 % band", "",
-        f"Command: `{cmd}` (module docstring: definitions). `reconstruct` defaults{' and velocity_eiv=False' if args.no_velocity_eiv else ''} (library orders "
+        f"Command: `{cmd}` (module docstring: definitions). `reconstruct(coordination={args.coordination!r})` (library orders "
         f"`system.orders['gmr']`), `force_band(level=0.95)` from `GlobalModel.covariance`.", "",
         "Columns: coverage of F_r,true by the 95 % band on the interwell span (target >= 90 %) and on the "
         "error box; the band's median full width on the span relative to max |F_r,true| there; the model's "

@@ -10,7 +10,7 @@ arch snaps through twice a period) by
   runs one period under the recorded input; RMS error of x over the RMS of x),
 - the rate of well-to-well hops of a free run over the whole record, against the truth's;
 
-for the default (`reconstruct`, coordination "auto"), the paper's route ("gls", "hermite")
+for the default (`reconstruct`, coordination "evidence"), the paper's route ("gls", "hermite")
 and GMC-SINDy.
 
     python studies/single_tone.py [--seeds 3] [--out results/single_tone.md]
@@ -32,7 +32,6 @@ CROSS = dict(amplitude=0.5, frequency=0.5, duration=120.0)
 CASES = (("x", 50), ("x", 30), ("v", 50), ("v", 30), ("xva", 50))
 METHODS = {
     "default": lambda r: gj.reconstruct(r, throw=False),
-    "structured noise": lambda r: gj.reconstruct(r, structured_noise=True, throw=False),
     "paper gls": lambda r: gj.reconstruct(r, coordination="gls", throw=False),
     "paper hermite": lambda r: gj.reconstruct(r, coordination="hermite", throw=False),
     "GMC-SINDy": lambda r: gj.gmc_sindy(r, throw=False),
@@ -235,7 +234,7 @@ def write(path, rows, true_rate, secs, seeds):
         "with sensor noise at the training SNR, each period started from the measured state, compared with the "
         "measured x), beside the truth's on that same record, and whether the model's is within 20 % of the truth's "
         "(the truth's is not 0 there: noise alone costs it); hops per second of a free run (within 20 % of the "
-        "truth's: yes/no); the global degree; the coordination the default took; warnings printed. Oracles: the "
+        "truth's: yes/no); the global degree; the route; warnings printed. Oracles: the "
         "Hermite interpolant of the exact value and slope at both wells is 14.6 % off over the box, with the "
         "curvature 2.6 %; the rows 'curvature oracle' and 'third-order oracle' are the interpolants of the exact "
         "Taylor data to second and third order with the truth's damping (no records: what exact local data at the "

@@ -1,11 +1,11 @@
-"""Issue 15: synthetic stress cases with the defaults, against the curvature oracle.
+"""Synthetic stress cases on both routes, against the curvature oracle.
 
 Non-polynomial cells (the shallow arch / von Mises truss, the magnetic bistable, the truss cells
 of a 3-cell Kresling chain) excited by a base sweep at 0.2-0.5 % of their interwell distance,
 30 dB noise on every channel, float32 time stamps (cast to float32 and back, as a lab file
 stores them) and partial sensors (displacement only, velocity only with the equilibrium given,
-a chain without its velocity channels). Each case is reconstructed with `gmr.reconstruct`
-defaults and judged by
+a chain without its velocity channels). Each case is reconstructed by `gmr.reconstruct` on each
+route of `--routes` (default: "evidence", the default, and "gls", the paper's route) and judged by
 
 - spurious wells: stable equilibria of the fitted restoring force within one box-span of the
   metrics box, against the truth's (count);
@@ -15,26 +15,14 @@ defaults and judged by
   widened by two spans on either side is diverged;
 - restoring error (relative L2 over the metrics box) against the curvature oracle's: the
   Hermite interpolant of each well's exact F, F', F'' (target: within 2x);
-- the noise floor: the same interpolant with each well's F, F', F''/2 drawn about the truth's
-  with the local fit's standard errors (`TermResolution.se_h`), median and 90th percentile over
-  400 draws (SciPy's `KroghInterpolator`, not the tool's): what the paper's exact interpolant
-  reaches from local Taylor data as noisy as these records allow. Not a bound on every
-  estimator: the joint regression weighs the raw records with a curvature prior and may beat it
-  (arch_x). `--floor-seeds N` checks those standard errors against the scatter of the local
-  estimates over N noise seeds, and for a velocity-only case refits the same sweeps with x
-  measured, as recorded and high-passed at v's integration cut-off (`slow_content`);
-- whether the failures are warned (`GMRDataWarning`), and the per-well resolution table
-  (`stats["resolution"]`, `gmr_jax._reconstruct._resolution`);
-- the excitation advice checked: where a needed term is unresolved, the case is re-recorded
-  with the base amplitude scaled to the advised one, and (separately) at the original amplitude
-  with the advised SNR, and refitted.
+- whether the failures are warned (`GMRDataWarning`).
+
+`--slow-seeds N` refits a velocity-only case's sweeps with x measured instead, as recorded and
+high-passed at v's integration cut-off (`slow_content`): what a velocity sensor cannot carry.
 
     python studies/stress_cases.py [--cases arch_xva,magnet_xva_f32,...] [--seeds 1]
-        [--out results/stress_cases.md]
-    python studies/stress_cases.py --sweep arch --out results/stress_cases_sweep.md
-        # the resolution bound against the restoring error, by amplitude
-    python studies/stress_cases.py --floor-seeds 8 --cases arch_v_f32,kresling3_xa_f32 \
-        --out results/stress_cases_floor.md   # the noise floor against the seeds' scatter
+        [--routes evidence,gls] [--out results/stress_cases.md]
+    python studies/stress_cases.py --slow-seeds 4 --cases arch_v_f32 --out results/stress_cases_slow.md
 """
 
 import argparse
@@ -49,7 +37,7 @@ import numpy as np
 import gmr_jax as g
 
 SNR = 30.0
-MAX_ADVISED_RATIO = 0.3  # the report's small-vibration cap (it advises samples or SNR beyond it)
+ROUTES = ("evidence", "gls")
 TARGET_RATIO = 0.0045  # the most excited well of each case at 0.45 % of its interwell distance
 
 
@@ -154,43 +142,6 @@ def oracle_error(system, dof: int, order: int = 2) -> float:
     return float(np.linalg.norm(fit - truth) / np.linalg.norm(truth))
 
 
-def noise_floor(system, dof: int, se: np.ndarray, draws: int = 400, seed: int = 0) -> np.ndarray:
-    """Restoring errors (draws,) of the curvature oracle with each well's Taylor data F^(k)/k!
-    drawn from N(truth, se^2) (`se` (wells, 3), the local fits' standard errors): SciPy's Hermite
-    interpolant (`KroghInterpolator`, repeated nodes take F, F', F''), relative L2 over the box."""
-    from scipy.interpolate import KroghInterpolator
-
-    nodes = np.asarray(system.equilibria[:, dof], float)
-    taylor = truth_taylor(system, dof)
-    fact = np.array([1.0, 1.0, 2.0])
-    xs, truth = truth_on_box(system, dof)
-    rng = np.random.default_rng(seed)
-    errs = []
-    for _ in range(draws):
-        tk = (taylor + rng.standard_normal(taylor.shape) * se) * fact  # F, F', F''
-        fit = KroghInterpolator(np.repeat(nodes, 3), tk.reshape(-1))(xs)
-        errs.append(np.linalg.norm(fit - truth) / np.linalg.norm(truth))
-    return np.array(errs)
-
-
-def matched_wells(res, system, dof: int) -> list | None:
-    """Per truth well of `dof`, the resolution report's nearest fitted well (None where the fit found a
-    different number of wells)."""
-    wells = [w for w in res.wells if w.dof == dof]
-    nodes = np.asarray(system.equilibria[:, dof], float)
-    if len(wells) != nodes.size:
-        return None
-    eq = np.array([w.equilibrium for w in wells])
-    return [wells[int(np.argmin(np.abs(eq - x)))] for x in nodes]
-
-
-def local_se(res, system, dof: int) -> np.ndarray | None:
-    """(wells, 3) the local fits' standard errors of F, F', F''/2 at the truth's wells of `dof`
-    (`se_h`: the local fit's, or the hierarchical fit's where larger or the term was dropped; `matched_wells`)."""
-    wells = matched_wells(res, system, dof)
-    return None if wells is None else np.array([[t.se_h for t in w.terms[:3]] for w in wells])
-
-
 # --- criteria ---------------------------------------------------------------------------------
 
 
@@ -242,35 +193,32 @@ def divergence(model, system, amplitude: float, seed: int = 0) -> dict:
             "forced": int((~ok_forced).sum()), "n_forced": int(ok_forced.size)}
 
 
-def evaluate(case: Case, amplitude: float, seed: int, snr: float = SNR) -> dict:
+def evaluate(case: Case, amplitude: float, seed: int, route: str = "evidence", snr: float = SNR) -> dict:
     system = case.make_system()
     recs = recordings(case, amplitude, seed, snr)
+    head = {"case": case.name, "seed": seed, "amplitude": amplitude, "snr": snr, "route": route}
     t0 = time.time()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            sol = g.reconstruct(recs, throw=False)
+            sol = g.reconstruct(recs, coordination=route, throw=False)
         except g.GMRInputError as e:
-            return {"case": case.name, "seed": seed, "amplitude": amplitude, "snr": snr, "refused": str(e)}
+            return head | {"refused": str(e)}
     secs = time.time() - t0
     data_warnings = [str(w.message) for w in caught if issubclass(w.category, g.GMRDataWarning)]
     model = sol.value
     d = system.truth.n_dof
-    res = sol.stats["resolution"]
-    row = {"case": case.name, "seed": seed, "amplitude": amplitude, "snr": snr, "secs": secs, "result": g.RESULTS[sol.result] or "successful",
-           "warnings": data_warnings, "resolution": res, "routes": [r.stats.get("coordination") for r in sol.stats["dofs"]],
-           "ratios": [w.ratio for w in res.wells], "dofs": []}
+    row = head | {"secs": secs, "result": g.RESULTS[sol.result] or "successful", "warnings": data_warnings,
+                  "degrees": [r.stats.get("degree", r.stats.get("K_r")) for r in sol.stats["dofs"]],
+                  "ratios": response_ratios(system, amplitude).ravel().tolist(), "dofs": []}
     div = divergence(model, system, amplitude, seed)
     row["divergence"] = div
     for i in range(d):
         fit_w, true_w = well_counts(model, system, i)
         err = g.metrics.restoring_error(model, system.truth, i, system.x_range[i])
         orc = oracle_error(system, i)
-        se = local_se(res, system, i)
-        floor = noise_floor(system, i, se) if se is not None else np.array([np.nan])
         row["dofs"].append({"wells": fit_w, "true_wells": true_w, "error": err, "oracle": orc,
-                            "oracle_vs": oracle_error(system, i, 1), "ratio": err / orc,
-                            "floor": float(np.median(floor)), "floor90": float(np.percentile(floor, 90))})
+                            "oracle_vs": oracle_error(system, i, 1), "ratio": err / orc})
     row["pass"] = {
         "wells": all(x["wells"] <= x["true_wells"] for x in row["dofs"]),
         "divergence": div["free"] == 0 and div["forced"] == 0,
@@ -278,24 +226,6 @@ def evaluate(case: Case, amplitude: float, seed: int, snr: float = SNR) -> dict:
     }
     row["warned"] = bool(data_warnings)
     return row
-
-
-def advised_snr(row: dict) -> float | None:
-    """The SNR at which every needed term would be resolved at the same amplitude (20 log10 rho dB more)."""
-    rhos = [t.rho for _, t in row["resolution"].missing()]
-    return row["snr"] + 20 * np.log10(max(rhos)) if rhos else None
-
-
-def advised_amplitude(row: dict) -> float | None:
-    """The base amplitude at which every needed term would be resolved (the report's advice,
-    scaled by the largest advised / current amplitude ratio), None when nothing is missing."""
-    res = row["resolution"]
-    miss = res.missing()
-    # the advice itself says when amplitude alone cannot do it: F' (its standard error does not fall with
-    # amplitude at a fixed SNR), or an amplitude beyond the small-vibration regime
-    if not miss or any(t.advised_ratio is None or t.advised_ratio > MAX_ADVISED_RATIO for _, t in miss):
-        return None
-    return row["amplitude"] * max(t.advised_ratio / w.ratio for w, t in miss)
 
 
 # --- report -----------------------------------------------------------------------------------
@@ -307,79 +237,51 @@ def _pct(x):
 
 def describe(row: dict, header: str) -> list[str]:
     if "refused" in row:
-        return [f"### {header}", "", f"Base amplitude {row['amplitude']:.3g}, {row['snr']:.3g} dB: refused "
-                f"(`GMRInputError`): {row['refused']}", ""]
+        return [f"### {header}", "", f"Base amplitude {row['amplitude']:.3g}, {row['snr']:.3g} dB, route "
+                f"{row['route']}: refused (`GMRInputError`): {row['refused']}", ""]
     p = row["pass"]
     div = row["divergence"]
     out = [f"### {header}", "",
            f"Base amplitude {row['amplitude']:.3g}, {row['snr']:.3g} dB; amplitude ratios per well "
-           f"{', '.join(f'{100 * r:.2g} %' for r in row['ratios'])}; coordination {', '.join(map(str, row['routes']))}; "
-           f"{row['secs']:.0f} s; result {row['result']}.", "",
-           "| DOF | wells fitted / true | restoring error | curvature oracle | ratio (target <= 2) | value+slope oracle "
-           "| noise floor (median / 90 %) |",
-           "|---|---|---|---|---|---|---|"]
+           f"{', '.join(f'{100 * r:.2g} %' for r in row['ratios'])}; route {row['route']}, restoring degree "
+           f"{', '.join(map(str, row['degrees']))}; {row['secs']:.0f} s; result {row['result']}.", "",
+           "| DOF | wells fitted / true | restoring error | curvature oracle | ratio (target <= 2) | value+slope oracle |",
+           "|---|---|---|---|---|---|"]
     for i, x in enumerate(row["dofs"]):
         out.append(f"| {i} | {x['wells']} / {x['true_wells']} | {_pct(x['error'])} | {_pct(x['oracle'])} | "
-                   f"{x['ratio']:.2f} | {_pct(x['oracle_vs'])} | {_pct(x['floor'])} / {_pct(x['floor90'])} |")
+                   f"{x['ratio']:.2f} | {_pct(x['oracle_vs'])} |")
     out += ["", f"Divergence: {div['free']} of {div['n_free']} free runs, {div['forced']} of {div['n_forced']} runs "
             f"under the training sweep. Criteria: spurious wells {'pass' if p['wells'] else 'FAIL'}, divergence "
             f"{'pass' if p['divergence'] else 'FAIL'}, error within 2x of the oracle {'pass' if p['error'] else 'FAIL'}; "
             f"GMRDataWarnings: {len(row['warnings'])}.", ""]
     if row["warnings"]:
         out += [f"- warning: {w[:400]}{'...' if len(w) > 400 else ''}" for w in row["warnings"]] + [""]
-    out += ["Per-well resolution (`stats[\"resolution\"]`):", "", str(row["resolution"]), ""]
     return out
 
 
-def nominal_kresling5() -> list[str]:
-    """Not a stress case: the resolution table of the nominal 5-cell chain (0.3 mm, 60 dB, seed 0)."""
+def nominal_kresling5(routes) -> list[str]:
+    """Not a stress case: the nominal 5-cell chain (0.3 mm, 60 dB, seed 0) on each route."""
     s = g.systems.kresling5()
     recs = g.systems.make_recordings(s, g.systems.KRESLING5_AMPLITUDE, seed=0)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        sol = g.reconstruct(recs)
-    errs = [g.metrics.restoring_error(sol.value, s.truth, i, s.x_range[i]) for i in range(5)]
     orc = [oracle_error(s, i) for i in range(5)]
-    return ["## Not a stress case: the nominal 5-cell Kresling chain (0.3 mm, 60 dB, seed 0)", "",
-            f"Restoring error per cell {', '.join(_pct(e) for e in errs)}; curvature oracle "
-            f"{', '.join(_pct(e) for e in orc)}; GMRDataWarnings: "
-            f"{sum(issubclass(w.category, g.GMRDataWarning) for w in caught)}.", "",
-            str(sol.stats["resolution"]), ""]
+    out = ["## Not a stress case: the nominal 5-cell Kresling chain (0.3 mm, 60 dB, seed 0)", "",
+           f"Curvature oracle per cell {', '.join(_pct(e) for e in orc)}.", "",
+           "| route | restoring error per cell | GMRDataWarnings |", "|---|---|---|"]
+    for route in routes:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            sol = g.reconstruct(recs, coordination=route)
+        errs = [g.metrics.restoring_error(sol.value, s.truth, i, s.x_range[i]) for i in range(5)]
+        out.append(f"| {route} | {', '.join(_pct(e) for e in errs)} | "
+                   f"{sum(issubclass(w.category, g.GMRDataWarning) for w in caught)} |")
+    return out + [""]
 
 
-def sweep(system_name: str, seeds: int) -> list[str]:
-    """The F'' bound of the resolution report against the restoring error, by amplitude."""
-    case = Case(f"{system_name}_xva", system_name, "xva")
-    s = case.make_system()
-    lines = [f"# Resolution bound against restoring error: {system_name}, x v a at {SNR:g} dB, by amplitude", "",
-             f"Curvature oracle {_pct(oracle_error(s, 0))}. Columns: the most excited well's amplitude ratio, the "
-             "largest F'' bound over the wells (two noise-limited standard errors of F''/2 carried through the "
-             "interpolant of F, F', F'' at the wells: RMS over the span, % of the force's RMS), "
-             "the restoring error and its ratio to the oracle, F'' resolved at every well (bound <= "
-             f"{100 * g.ResolutionReport.bound:g} %).",
-             "", "| ratio | seed | F'' bound | restoring error | / oracle | F'' resolved everywhere |", "|---|---|---|---|---|---|"]
-    for ratio in (0.002, 0.0035, 0.005, 0.01, 0.02, 0.04):
-        amp = base_amplitude(s, ratio)
-        for seed in range(seeds):
-            recs = recordings(case, amp, seed)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                sol = g.reconstruct(recs, throw=False)
-            res = sol.stats["resolution"]
-            b2 = [w.terms[2] for w in res.wells]
-            bound = max(t.impact for t in b2)
-            err = g.metrics.restoring_error(sol.value, s.truth, 0, s.x_range[0])
-            lines.append(f"| {_pct(ratio)} | {seed} | {_pct(bound)} | {_pct(err)} | {err / oracle_error(s, 0):.2f} | "
-                         f"{all(t.resolved for t in b2)} |")
-            print(lines[-1], flush=True)
-    return lines
-
-
-def slow_content(case: Case, seeds: int) -> list[str]:
+def slow_content(case: Case, seeds: int, route: str = "evidence") -> list[str]:
     """Is it what a velocity sensor cannot carry? The same records with x measured, as recorded
     and with their content below the cut-off v's integration would use removed (`_integrate`:
     the static offset and its drift as the sweep passes each resonance, a signature of F'' at
-    small vibrations), each reconstructed with the defaults, beside the velocity-only case."""
+    small vibrations), each reconstructed on `route`, beside the velocity-only case."""
     from scipy.fft import dct, idct
 
     def remove_drift(y, dt, f_hp):  # as `_integrate.remove_drift`: cosine-transform content below f_hp zeroed
@@ -392,7 +294,7 @@ def slow_content(case: Case, seeds: int) -> list[str]:
     lines = [f"### {case.name}: is it the slow content a velocity sensor cannot carry?", "",
              "The same sweeps with x measured instead (displacement only, 30 dB), as recorded and high-passed at "
              "the cut-off the velocity-only integration uses (cosine transform, `_integrate.remove_drift`), "
-             "each with `gmr.reconstruct` defaults.", "",
+             f"each with `gmr.reconstruct(coordination={route!r})`.", "",
              "| seed | cut-off (Hz, per well) | x as recorded | x high-passed | v only (this case) |", "|---|---|---|---|---|"]
     for seed in range(seeds):
         raw = g.systems.make_recordings(system, amp, snr_db=SNR, seed=seed)
@@ -410,63 +312,10 @@ def slow_content(case: Case, seeds: int) -> list[str]:
         for recs in (recs_x, recs_hp, recordings(case, amp, seed)):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                sol = g.reconstruct(recs, throw=False)
+                sol = g.reconstruct(recs, coordination=route, throw=False)
             errs.append(g.metrics.restoring_error(sol.value, system.truth, 0, system.x_range[0]))
         lines.append(f"| {seed} | {', '.join(f'{c:.3g}' for c in cuts)} | {_pct(errs[0])} | {_pct(errs[1])} | {_pct(errs[2])} |")
         print(lines[-1], flush=True)
-    return lines + [""]
-
-
-def floor_check(case: Case, seeds: int) -> list[str]:
-    """The noise floor's standard errors against the scatter of the local F''/2 over `seeds` noise
-    seeds, and the defaults' restoring error over those seeds against the floor."""
-    system = case.make_system()
-    amp = base_amplitude(system, case.ratio)
-    d = system.truth.n_dof
-    coefs, ses, errs = [], [], []  # per seed: (dof, wells) F''/2, (dof, wells, 3) se_h, (dof,) errors
-    for seed in range(seeds):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            sol = g.reconstruct(recordings(case, amp, seed), throw=False)
-        res = sol.stats["resolution"]
-        ses.append([local_se(res, system, i) for i in range(d)])
-        coefs.append([[w.terms[2].coef for w in matched_wells(res, system, i)] for i in range(d)])
-        errs.append([g.metrics.restoring_error(sol.value, system.truth, i, system.x_range[i]) for i in range(d)])
-        print(case.name, seed, errs[-1], flush=True)
-    coefs, ses, errs = np.array(coefs), np.array(ses), np.array(errs)
-    rms_se = np.sqrt(np.mean(ses**2, axis=0))  # (dof, wells, 3)
-    lines = [f"## {case.name}: {seeds} noise seeds", "",
-             f"Base amplitude {amp:.3g}, {SNR:g} dB, `gmr.reconstruct` defaults on each seed.", "",
-             "| DOF | well x | truth F''/2 | mean estimate | scatter (sd over seeds) | RMS standard error (`se_h`) "
-             "| dropped |", "|---|---|---|---|---|---|---|"]
-    for i in range(d):
-        taylor = truth_taylor(system, i)
-        for k, x in enumerate(np.asarray(system.equilibria[:, i], float)):
-            cs = coefs[:, i, k]
-            lines.append(f"| {i} | {x:.4g} | {taylor[k, 2]:.4g} | {cs.mean():.4g} | {cs.std(ddof=1):.3g} | "
-                         f"{rms_se[i, k, 2]:.3g} | {int(np.sum(cs == 0))} |")
-    lines += ["", "| DOF | curvature oracle | noise floor (median / 90 %, RMS standard errors) | restoring error "
-              "(median / max over seeds) | per seed |", "|---|---|---|---|---|"]
-    for i in range(d):
-        floor = noise_floor(system, i, rms_se[i])
-        lines.append(f"| {i} | {_pct(oracle_error(system, i))} | {_pct(np.median(floor))} / "
-                     f"{_pct(np.percentile(floor, 90))} | {_pct(np.median(errs[:, i]))} / {_pct(errs[:, i].max())} | "
-                     f"{', '.join(f'{100 * e:.3g}' for e in errs[:, i])} % |")
-    # cells of one design (the truth's Taylor data proportional): an estimator that pools them
-    # (inverse-variance mean of the relative Taylor data) has a lower floor
-    taylors = np.array([truth_taylor(system, i) for i in range(d)])  # (dof, wells, 3)
-    scale = taylors[:, :1, 1:2]  # each cell's F' at its first well
-    rel = taylors / scale
-    if d > 1 and np.allclose(rel, rel[:1], rtol=1e-6, atol=1e-12):
-        rel_se = rms_se / np.abs(scale)
-        with np.errstate(divide="ignore"):
-            pooled = np.where(np.all(rel_se > 0, axis=0), 1.0 / np.sqrt(np.sum(1.0 / np.where(rel_se > 0, rel_se, np.inf) ** 2,
-                                                                              axis=0)), 0.0)
-        floor = noise_floor(system, 0, pooled * np.abs(scale[0]))
-        lines += ["", f"The {d} cells are one design (the truth's Taylor data proportional): pooled (inverse-variance "
-                  f"mean of each well's relative F, F', F''/2 over the cells), the noise floor is {_pct(np.median(floor))} "
-                  f"(median) / {_pct(np.percentile(floor, 90))} (90 %), against the defaults' median "
-                  f"{_pct(np.median(errs))} over seeds and cells."]
     return lines + [""]
 
 
@@ -481,27 +330,23 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", default=",".join(CASES))
     ap.add_argument("--seeds", type=int, default=1)
-    ap.add_argument("--sweep", default=None, help="bound calibration on this system (arch, magnet) instead")
-    ap.add_argument("--floor-seeds", type=int, default=0, help="the noise floor against this many seeds' scatter instead")
-    ap.add_argument("--no-advice-check", action="store_true")
-    ap.add_argument("--no-nominal", action="store_true", help="skip the nominal kresling5 resolution table")
+    ap.add_argument("--routes", default=",".join(ROUTES), help="reconstruct's routes, side by side (evidence, gls, hermite)")
+    ap.add_argument("--slow-seeds", type=int, default=0,
+                    help="instead: the velocity-only cases refitted from x as recorded and high-passed, this many seeds")
+    ap.add_argument("--no-nominal", action="store_true", help="skip the nominal kresling5 table")
     ap.add_argument("--out", default="results/stress_cases.md")
     args = ap.parse_args()
-    if args.sweep:
+    routes = args.routes.split(",")
+    if args.slow_seeds:
         t0 = time.time()
-        lines = sweep(args.sweep, args.seeds)
-        lines.insert(1, f"\n`python studies/stress_cases.py --sweep {args.sweep} --seeds {args.seeds} --out {args.out}` "
-                        f"({(time.time() - t0) / 60:.1f} min).")
-        return emit(args.out, lines)
-    if args.floor_seeds:
-        t0 = time.time()
-        lines = [f"# Stress cases: the noise floor against {args.floor_seeds} noise seeds", ""]
+        lines = ["# Stress cases: what a velocity sensor cannot carry", ""]
         for name in args.cases.split(","):
-            lines += floor_check(CASES[name], args.floor_seeds)
             if CASES[name].sensing == "v" and CASES[name].system != "kresling3":
-                lines += slow_content(CASES[name], min(args.floor_seeds, 4))
-        lines.insert(1, f"\n`python studies/stress_cases.py --floor-seeds {args.floor_seeds} --cases {args.cases} "
-                        f"--out {args.out}` ({(time.time() - t0) / 60:.1f} min on the shared 2-core dev machine).")
+                for route in routes:
+                    lines += slow_content(CASES[name], args.slow_seeds, route)
+        lines.insert(1, f"\n`python studies/stress_cases.py --slow-seeds {args.slow_seeds} --cases {args.cases} "
+                        f"--routes {args.routes} --out {args.out}` ({(time.time() - t0) / 60:.1f} min on the shared "
+                        f"2-core dev machine).")
         return emit(args.out, lines)
     t_start = time.time()
     body, summary = [], []
@@ -509,20 +354,13 @@ def main():
         case = CASES[name]
         amp = base_amplitude(case.make_system(), case.ratio)
         for seed in range(args.seeds):
-            row = evaluate(case, amp, seed)
-            body += describe(row, f"{name}, seed {seed}")
-            adv = None if args.no_advice_check else advised_amplitude(row)
-            after = evaluate(case, adv, seed) if adv is not None else None
-            if after is not None:
-                body += describe(after, f"{name}, seed {seed}, re-recorded at the advised amplitude")
-            snr = None if args.no_advice_check else advised_snr(row)
-            louder = evaluate(case, amp, seed, snr) if snr is not None else None
-            if louder is not None:
-                body += describe(louder, f"{name}, seed {seed}, re-recorded at the advised SNR")
-            summary.append((row, after, louder))
-            print("\n".join(describe(row, name)[:12]), flush=True)
+            for route in routes:
+                row = evaluate(case, amp, seed, route)
+                body += describe(row, f"{name}, seed {seed}, {route}")
+                summary.append(row)
+                print("\n".join(describe(row, f"{name}, {route}")[:10]), flush=True)
     if not args.no_nominal:
-        body += nominal_kresling5()
+        body += nominal_kresling5(routes)
     write(args, summary, body, time.time() - t_start)
 
 
@@ -530,38 +368,23 @@ def write(args, summary, body, secs):
     lines = ["# Stress cases", "",
              f"`python studies/stress_cases.py --seeds {args.seeds}"
              + (f" --cases {args.cases}" if args.cases != ",".join(CASES) else "")
+             + (f" --routes {args.routes}" if args.routes != ",".join(ROUTES) else "")
              + f"` ({secs / 60:.1f} min on the shared 2-core dev machine).", "",
-             __doc__.split("\n\n    python")[0].split("\n\n", 1)[1], "",
-             "| case | seed | amplitude ratios | spurious wells | diverged (free / forced) | restoring error / oracle "
-             "(noise floor, median; per DOF) | within 2x | warned | resolution: needed and unresolved | at the advised amplitude "
-             "| at the advised SNR (same amplitude) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
-
-    def checked(row, after, what):
-        if after is None:
-            return "-"
-        if "refused" in after:
-            return f"{what}: refused ({after['refused'][:90]}...)"
-        errs_a = ", ".join(f"{_pct(x['error'])}" for x in after["dofs"])
-        return (f"{what}: still missing {len(after['resolution'].missing())}; error {errs_a}; within 2x "
-                f"{'yes' if after['pass']['error'] else 'no'}; diverged {after['divergence']['free']}+"
-                f"{after['divergence']['forced']}; warnings {len(after['warnings'])}")
-
-    for row, after, louder in summary:
+             __doc__.split("\n\n`--slow-seeds")[0].split("\n\n", 1)[1], "",
+             "| case | seed | route | amplitude ratios | spurious wells | diverged (free / forced) | restoring error / oracle "
+             "(per DOF) | within 2x | warned |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for row in summary:
         if "refused" in row:
-            lines.append(f"| {row['case']} | {row['seed']} | refused: {row['refused'][:120]} | | | | | | | | |")
+            lines.append(f"| {row['case']} | {row['seed']} | {row['route']} | refused: {row['refused'][:120]} | | | | | |")
             continue
         div = row["divergence"]
         spur = sum(max(0, x["wells"] - x["true_wells"]) for x in row["dofs"])
-        errs = ", ".join(f"{_pct(x['error'])} / {_pct(x['oracle'])} (floor {_pct(x['floor'])})" for x in row["dofs"])
-        miss = "; ".join(f"DOF {w.dof} x={w.equilibrium:.3g}: {t.name}"
-                         for w, t in row["resolution"].missing()) or "-"
-        adv = (checked(row, after, f"x{after['amplitude'] / row['amplitude']:.2g} base amplitude") if after else
-               "not advised (F' unresolved, or beyond the small-vibration regime)" if row["resolution"].missing() else "-")
-        snr = checked(row, louder, f"{louder['snr']:.3g} dB" if louder else "")
-        lines.append(f"| {row['case']} | {row['seed']} | {', '.join(f'{100 * r:.2g}' for r in row['ratios'])} % | {spur} | "
+        errs = ", ".join(f"{_pct(x['error'])} / {_pct(x['oracle'])}" for x in row["dofs"])
+        lines.append(f"| {row['case']} | {row['seed']} | {row['route']} | "
+                     f"{', '.join(f'{100 * r:.2g}' for r in row['ratios'])} % | {spur} | "
                      f"{div['free']}/{div['n_free']}, {div['forced']}/{div['n_forced']} | {errs} | "
-                     f"{'yes' if row['pass']['error'] else 'NO'} | {len(row['warnings'])} | {miss} | {adv} | {snr} |")
+                     f"{'yes' if row['pass']['error'] else 'NO'} | {len(row['warnings'])} |")
     lines += ["", "## Per case", ""] + body
     with open(args.out, "w") as fh:
         fh.write("\n".join(lines) + "\n")
