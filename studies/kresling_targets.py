@@ -83,7 +83,7 @@ def chain(twist: str, fmax: float | None = None):
     return system if fmax is None else dataclasses.replace(system, sweep=(system.sweep[0], fmax))
 
 
-def run(twist: str, amp: float, seed: int, fmax: float | None = None, coordination: str = "auto") -> dict:
+def run(twist: str, amp: float, seed: int, fmax: float | None = None, coordination: str = "evidence") -> dict:
     system = chain(twist, fmax)
     recs = g.systems.make_recordings(system, amp, snr_db=60.0, seed=seed)
     L = np.ptp(system.equilibria, axis=0)
@@ -100,7 +100,7 @@ def run(twist: str, amp: float, seed: int, fmax: float | None = None, coordinati
         t = d.local_coef / se
         local = t.shape[1] > max(i2, i3)  # the evidence route fits no local models
         cells.append({
-            "route": d.stats["coordination"], "K_r": int(d.stats["K_r"]), "r_i": list(map(int, d.stats.get("r_i", []))),
+            "route": d.stats["coordination"], "K_r": int(d.stats.get("degree", d.stats.get("K_r", -1))), "r_i": list(map(int, d.stats.get("r_i", []))),
             "t2": [float(v) for v in t[:, i2]] if local else [], "t3": [float(v) for v in t[:, i3]] if local else [],
             "why": d.stats.get("paper_route_rejected", []),
             "ratio": [float(0.5 * np.ptp(r.x[:, i]) / L[i]) for r in recs],
@@ -174,7 +174,7 @@ def main():
     p.add_argument("--fmax", type=float, default=None,
                    help="upper frequency of the training chirp (Hz; default the system's 10 Hz): the excitation check")
     p.add_argument("--tag", default="", help="suffix of the results file: results/kresling_targets_<tag>.md")
-    p.add_argument("--coordination", default="auto", help="reconstruct's coordination (auto: the default)")
+    p.add_argument("--coordination", default="evidence", help="reconstruct's coordination (evidence: the default)")
     p.add_argument("--replot", action="store_true", help="only rewrite the Markdown from the --json of an earlier run")
     args = p.parse_args()
     cmd = " ".join(["python studies/kresling_targets.py"] + sys.argv[1:])

@@ -299,24 +299,3 @@ def test_fast_compile_flags_only_before_jax_starts(monkeypatch):
     __import__("jax").numpy.zeros(1).block_until_ready()  # started in this process
     monkeypatch.setenv("XLA_FLAGS", "")
     assert fast_compile_flags() is False and os.environ["XLA_FLAGS"] == ""
-
-
-@pytest.mark.slow  # two gmr fit runs on 8 s sweeps (~8 s)
-def test_fit_corrects_the_joint_damping_for_the_noise_on_a_measured_v(tmp_path, capsys):
-    """x, v, a measured at 30 dB, 5 degree sweeps (the joint regression fits the damping): its velocity columns
-    are corrected for the noise on v (said, and kept per well in the model file's coordination entries, the
-    noise's sd as make_recordings added it); `--no-velocity-eiv` takes v as exact."""
-    s = g.systems.bistable_joint("position_independent")
-    recs = g.systems.make_recordings(s, np.deg2rad(5.0), snr_db=30.0, seed=4)
-    paths = _saved(recs, tmp_path)
-    out, plain = tmp_path / "m.json", tmp_path / "plain.json"
-    assert main(["fit", *paths, "--out", str(out), "--no-figure"]) == 0
-    assert "corrected for the noise on v" in describe(out, detail=True)
-    entry = json.loads(out.read_text())["coordination"][0]
-    assert "joint" in entry["route"]
-    true_sd = [np.sqrt(np.var(r.v[:, 0]) / 1e3) for r in recs]  # the noise make_recordings added
-    assert all(w["applied"] for w in entry["velocity_noise"])
-    np.testing.assert_allclose([w["noise_sd"] for w in entry["velocity_noise"]], true_sd, rtol=0.15)
-    assert main(["fit", *paths, "--out", str(plain), "--no-figure", "--no-velocity-eiv"]) == 0
-    assert "noise on v" not in describe(plain, detail=True)
-    assert "velocity_noise" not in json.loads(plain.read_text())["coordination"][0]

@@ -225,18 +225,22 @@ def test_accelerations_with_forces_on_every_mass(chain):
     np.testing.assert_allclose(ha, want, atol=1e-12)
 
 
-@pytest.mark.slow  # 5-cell training data and a reconstruction (~1-2 min)
-def test_default_reconstruction_keeps_the_paper_route_on_every_cell():
-    # an outward turn far beyond the energies the model is used on is not replaced: the joint
-    # regression there made the tip cell 1.41 % -> 3.56 % (caught by notebook 03)
+@pytest.mark.slow  # 5-cell training data and three reconstructions (~1 min)
+@pytest.mark.parametrize("twist,amp,seed,target", [
+    ("linear", 5e-4, 9, 0.005),      # the tip cell's records alone give 74 %: it follows the design's law
+    ("torque_free", 5e-4, 7, 0.03),
+    ("torque_free", 1e-3, 0, 0.03),  # the base cell's deployed record leaves its well: that cell goes its own way
+])
+def test_cells_of_one_design_reach_the_best_cells_accuracy(twist, amp, seed, target):
+    """Five Kresling cells of one design, each well recorded at 0.5-1 mm: every cell's restoring law
+    within the target (nominal 0.5 %, torque-free 3 %) over its box, the weakly excited tip cells
+    included."""
     import warnings
 
-    system = gmr_jax.systems.kresling5()
-    recs = gmr_jax.systems.make_recordings(system, gmr_jax.systems.KRESLING5_AMPLITUDE, snr_db=60, seed=0)
+    system = gmr_jax.systems.kresling5(twist=twist, damping_ratio=gmr_jax.systems.KRESLING5_DEPLOYMENT_DAMPING)
+    recs = gmr_jax.systems.make_recordings(system, amp, snr_db=60, seed=seed)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = gmr_jax.reconstruct(recs, gmr_jax.Library(*system.orders["gmr"]))
-    routes = [d.stats["coordination"] for d in res.stats["dofs"]]
-    assert routes == ["gls"] * 5
+        res = gmr_jax.reconstruct(recs)
     errs = [gmr_jax.metrics.restoring_error(res.value, system.truth, c, system.x_range[c]) for c in range(5)]
-    assert max(errs) < 0.016, errs
+    assert max(errs) < target, errs

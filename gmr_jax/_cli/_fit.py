@@ -27,7 +27,7 @@ def register(sub):
     f.add_argument("--out", required=True, help="model JSON to write (gmr-model/1)")
     add_columns_option(f)
     f.add_argument("--method", choices=["gmr", "gmc-sindy"], default="gmr",
-                   help="gmr: local fits at each well, then one global law; gmc-sindy: the baseline, one library on "
+                   help="gmr: one global law from every well's records (--coordination); gmc-sindy: the baseline, one library on "
                    "all data")
     f.add_argument("--coordination", choices=["evidence", "hermite", "gls"], default="evidence",
                    help="GMR's global step: evidence (default: one posterior of every well's records; the law, its "

@@ -44,8 +44,8 @@ def register(sub):
     p.add_argument("model", help="gmr-model/1 JSON (e.g. from gmr fit)")
     p.add_argument("--precision", type=int, default=4, help="significant digits of the numbers (default 4)")
     p.add_argument("--detail", action="store_true",
-                   help="also what each well's data resolved (per term), the coordination route and its reasons, "
-                   "the noise corrections, the cells that shared a design, and every other key of the file")
+                   help="also the route, restoring degree and shared design of each DOF, and every other key of "
+                   "the file")
     p.set_defaults(fn=run)
     return p
 

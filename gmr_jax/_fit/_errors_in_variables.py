@@ -93,8 +93,8 @@ def corrected_qr(
 
 def shifted_qr(qr: QRData, cross: Float[Array, " terms"]) -> QRData:
     """The compressed problem with its normal equations' right side Θ'Wy less `cross` (the expected
-    product of the columns' noise with the target's, where both hold the same sensor's noise:
-    `_reconstruct/_slow.band_rows`); `qr` where that is not finite."""
+    product of the columns' noise with the target's, where both hold the same sensor's noise);
+    `qr` where that is not finite."""
     out, _ = _moment_corrected(qr, jnp.zeros((cross.size, cross.size), qr.r.dtype), cross, jnp.zeros(()))
     return out
 

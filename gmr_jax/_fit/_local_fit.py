@@ -26,7 +26,7 @@ class AutoThreshold(eqx.Module):
 
 
 class BandRows(eqx.Module):
-    """One well's regression rows without the slow band of an integrated x (`_reconstruct/_slow.band_rows`):
+    """One well's regression rows without the slow band of an integrated x:
     the library columns (at the centre the fit takes, the weighted mean of x) and the target, each
     with its content between 0 and the record's drift cut-off removed (the mean kept)."""
 

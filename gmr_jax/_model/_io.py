@@ -140,8 +140,8 @@ def save_model(model, path, **extra) -> None:
 
     `model`: a `GlobalModel`, or the `Solution` that `reconstruct` / `gmc_sindy` returned: then
     the file also carries what `gmr fit` writes with it (`_metadata.fit_metadata`): the method,
-    the library orders, the training R² and NRMSE, the warnings, the data and speed ranges, the
-    resolution report and the coordination route (`gmr show` prints them; `gmr basins` and
+    the library orders, the training R² and NRMSE, the warnings, the data and speed ranges, and
+    per DOF the route, degree and design (`gmr show` prints them; `gmr basins` and
     `gmr actuate` read the ranges). `extra`: further top-level
     keys (they override those)."""
     from .._solution import Solution

@@ -251,6 +251,7 @@ def diagnose(recs, wells, model: GlobalModel, training: dict) -> list[str]:
         slope = np.polynomial.polynomial.polyval(eq, np.polynomial.polynomial.polyder(stiff))
         swing, swung = _sanity.check_swings(i, names, xcol, labels, eq, slope)
         found += swing + _sanity.check_amplitude(i, names, xcol, labels, eq, skip=swung)
+        found += _sanity.check_scales(i, names, xcol, labels)
         amps = [max(_sanity.vibration_amplitude(xcol[k]) for k in grp) for grp in groups]
         found += _sanity.check_global_shape(i, stiff, eq, amps, slope)
     return found + _sanity.check_fit_quality(training)

@@ -24,23 +24,21 @@ from .._errors import GMRInputError
 
 #: Percentile of |x - mean| taken as a recording's vibration amplitude (robust to a few spikes).
 AMPLITUDE_PERCENTILE = 99.9
-#: Rule 1: two wells closer than this fraction of the smaller vibration amplitude are one well.
+#: two wells closer than this fraction of the smaller vibration amplitude are one well.
 SAME_WELL_FRACTION = 0.5
-#: Rule 2: fraction of samples in the middle quarter of a record's range below which it is bimodal.
+#: fraction of samples in the middle quarter of a record's range below which it is bimodal.
 SWING_GAP_FRACTION = 0.05
-#: Rule 3: fraction (and least number) of samples in flat tops (runs of `CLIP_RUN` or more at
+#: fraction (and least number) of samples in flat tops (runs of `CLIP_RUN` or more at
 #: the extreme value) that makes a column clipped.
 CLIP_FRACTION, CLIP_MIN_SAMPLES, CLIP_RUN = 0.005, 5, 3
-#: Rule 4: an input-less record is driven if it builds up (rise over the noise floor before its
+#: an input-less record is driven if it builds up (rise over the noise floor before its
 #: start) or does not die out (last window over its peak).
 FREE_DECAY_RISE, FREE_DECAY_END = 1.5, 0.35
-#: Rule 6: vibration amplitude over the distance to the nearest other equilibrium.
+#: vibration amplitude over the distance to the nearest other equilibrium.
 LARGE_AMPLITUDE_RATIO = 0.3
-#: Rule 7: training R² below which a fit is reported.
+#: training R² below which a fit is reported.
 MIN_R2 = 0.5
-#: Rule 8: a kept local term smaller than this many standard errors is insignificant.
-MIN_T = 2.0
-#: Rule 9: outer wells are looked for within this many data spans of the recorded range; an
+#: outer wells are looked for within this many data spans of the recorded range; an
 #: escape barrier below this multiple of the energy differences inside the range is reported;
 #: a force between the wells above this multiple of (local stiffness x distance) is a blow-up.
 OUTER_SPANS, ESCAPE_RATIO, BLOWUP_RATIO = 1.0, 1.0, 10.0
@@ -66,7 +64,7 @@ def _g(v) -> str:
 
 
 def check_masses(names, masses) -> None:
-    """Rule 5 (refusal): every recording that carries `masses` must carry the same ones
+    """Refusal: every recording that carries `masses` must carry the same ones
     (relative difference below 1e-6); the model has one mass per DOF, and taking the first
     file's silently would scale the other files' forces wrongly.
 
@@ -82,7 +80,7 @@ def check_masses(names, masses) -> None:
 
 
 def check_distinct_wells(dof: int, groups, means, amplitudes) -> None:
-    """Rule 1 (refusal): two wells of one DOF whose equilibria (recording means) are closer
+    """Refusal: two wells of one DOF whose equilibria (recording means) are closer
     than `SAME_WELL_FRACTION` (0.5) times the smaller of their vibration amplitudes are not
     two equilibria: each record sweeps through the other's mean (runs of one well, or records
     swinging across wells). Two such recordings give no global information, and treating them
@@ -119,7 +117,7 @@ def _flat_samples(at: np.ndarray, run: int) -> int:
     return int(lengths[lengths >= run].sum())
 
 
-#: Rule 3, brief saturations: at least this share (and `CLIP_MIN_SAMPLES`) of the samples at the extreme value,
+#: at least this share (and `CLIP_MIN_SAMPLES`) of the samples at the extreme value,
 #: where no value just inside it repeats (`_at_a_rail`)
 CLIP_RAIL_FRACTION = 1e-4
 
@@ -144,7 +142,7 @@ def _at_a_rail(col: np.ndarray, at: np.ndarray, tol: float) -> bool:
 
 
 def check_clipping(name: str, columns: dict) -> list[str]:
-    """Rule 3: a measured column is clipped (saturated sensor or recorder) when at least
+    """a measured column is clipped (saturated sensor or recorder) when at least
     `CLIP_FRACTION` (0.5 %) of its samples, and at least `CLIP_MIN_SAMPLES` (5), sit at its
     maximum or at its minimum (within 1e-9 of its range) in flat tops: runs of at least
     `CLIP_RUN` (3) consecutive samples. A smooth peak is sampled at most twice at its top
@@ -216,7 +214,7 @@ def free_decay_violation(x, n_windows: int = 16) -> str | None:
 
 
 def check_missing_input(name: str, x, has_input: bool) -> list[str]:
-    """Rule 4: a recording without an input column (no `base_acc`, no `force`) must be a free
+    """a recording without an input column (no `base_acc`, no `force`) must be a free
     decay (contracts: an input may be absent only then); warn when `free_decay_violation`
     finds that some DOF's motion is not one (it was driven, so the fit, which takes the force
     as zero, misses the input).
@@ -236,19 +234,19 @@ def check_missing_input(name: str, x, has_input: bool) -> list[str]:
     return []
 
 
-#: Rule 13: a measured v or a and the matching derivative of x (both through one Savitzky-Golay
+#: a measured v or a and the matching derivative of x (both through one Savitzky-Golay
 #: filter) agree in scale within this factor, or are reported, where they correlate at least
 #: `UNITS_MIN_CORR` (below it the noise hides the scale: no verdict).
 UNITS_FACTOR, UNITS_MIN_CORR = 1.25, 0.9
 
-#: Rule 13c: a measured a that is the relative acceleration x'' (a simulation's state, a sensor on the base
+#: a measured a that is the relative acceleration x'' (a simulation's state, a sensor on the base
 #: subtracted), not the absolute one the equation of motion takes (a = x'' + base_acc): reported where the share
 #: of the smoothed a - base_acc that x'' does not explain (1 - r^2) is this many times the share of a itself.
 #: Built-in base-driven systems (both joints, NES, arch, magnet, Kresling-3; noise-free, 60 and 30 dB, seeds 0-1;
 #: absolute a): at most 1.0 (equal where the base acceleration is 0); a Duffing double well with relative a in the
 #: file (base 0.03-0.05 m/s^2 tones, 10 % vibrations): 32 (0.0255 against 0.0008), fitted with a negative viscous
 #: term, a v|v| term and a degree-7 law, and no other warning on the columns. Also reported where a - base_acc does
-#: not match x'' (rule 13 would give a factor as the fix, or no verdict) and a itself does, better.
+#: not match x'' (the scale check would give a factor as the fix, or no verdict) and a itself does, better.
 RELATIVE_A_RATIO = 10.0
 
 
@@ -265,14 +263,14 @@ def _scale_hint(s: float) -> str:
     return "; ".join(hints)
 
 
-#: Rule 13d: a measured acceleration whose mean departs from what the motion allows by more than this share of its
+#: a measured acceleration whose mean departs from what the motion allows by more than this share of its
 #: RMS is reported (audit 8: +0.1 m/s^2, 0.077 of the RMS, on one well's a: restoring error 2.3 % against a band of
 #: +-0.78 %, a barrier interval that excluded the truth; +0.5 m/s^2: 12 %; clean records of the audit 0.0003-0.0011)
 OFFSET_SHARE = 0.01
 
 
 def check_acceleration_offset(name: str, rec, topology) -> list[str]:
-    """Rule 13d: the mean of x'' over a record is (v(T) - v(0)) / T, near 0 for a structure vibrating about a well;
+    """the mean of x'' over a record is (v(T) - v(0)) / T, near 0 for a structure vibrating about a well;
     a measured a - base_acc (per cell for a chain) whose mean departs from it by more than `OFFSET_SHARE` of its RMS
     holds an offset (an accelerometer's DC bias, gravity on a tilted sensor), which the fit takes as a constant
     force at that well, moving its restoring force. v(T) - v(0) from the measured v, else from x (Savitzky-Golay).
@@ -312,7 +310,7 @@ def check_acceleration_offset(name: str, rec, topology) -> list[str]:
 
 
 def check_units(name: str, rec, topology) -> list[str]:
-    """Rule 13: the measured velocities and accelerations are the derivatives of the measured x
+    """the measured velocities and accelerations are the derivatives of the measured x
     in the same units. Per DOF, x' (x'') by Savitzky-Golay differentiation and the measured v (the
     relative acceleration from a: a minus the base acceleration, per cell for a chain), smoothed by
     the same filter (the window `auto_window` picks for x), are compared by the two least-squares
@@ -326,7 +324,7 @@ def check_units(name: str, rec, topology) -> list[str]:
     seeds 0-1; 108 columns of v and of a): the noise sits in the derivative of x, so the first
     scale is attenuated and the second is not: v at correlation >= 0.93, scales 0.86-1.002; a at
     correlation >= 0.9 (101 columns), 0.81-1.006. A time column in ms gives 1e6 for a, 1e3 for v. Where a
-    DOF's x has no measured derivative to compare (x only), rule 13b compares it with base_acc (`_base_scale`)."""
+    DOF's x has no measured derivative to compare (x only), the base-acceleration check compares it with base_acc (`_base_scale`)."""
     from .._recordings._derivatives import auto_window, differentiate
 
     x = np.asarray(rec.x, float)
@@ -339,7 +337,7 @@ def check_units(name: str, rec, topology) -> list[str]:
     if rec.a is not None and "a" not in rec.derived and info.get("from") != "a" and rec.driven:
         b = np.zeros(x.shape[0]) if rec.base_acc is None else np.asarray(rec.base_acc, float)
         rel = np.asarray(rec.a, float) - b[:, None]
-        as_given = np.asarray(rec.a, float)  # rule 13c's other reading: a itself is x''
+        as_given = np.asarray(rec.a, float)  # the other reading: a itself is x''
         if topology.name == "chain":
             rel = np.diff(rel, axis=1, prepend=0.0)  # cell i: a_i - a_(i-1), the cell's x_i''
             as_given = np.diff(as_given, axis=1, prepend=0.0)  # differs from `rel` in cell 0 only (checked there)
@@ -387,14 +385,14 @@ def check_units(name: str, rec, topology) -> list[str]:
     if rec.base_acc is not None and info.get("from") is None and (topology.name != "chain" or x.shape[1] == 1):
         for i, w in enumerate(windows):
             if w is None or w > x.shape[0] or any(k[0] == i for k in scales):
-                continue  # a DOF rule 13 already reported is not reported twice
+                continue  # a DOF the scale check already reported is not reported twice
             msg = _base_scale(name, i, x[:, i], rec, dt, w)
             if msg:
                 out.append(msg)
     return out
 
 
-#: Rule 13b: in m (x'' + base_acc) + F(x, v) = f, base_acc enters x'' with the factor -1 whatever the mass and the
+#: in m (x'' + base_acc) + F(x, v) = f, base_acc enters x'' with the factor -1 whatever the mass and the
 #: forces. Its factor fitted from x (with x, its square and cube, x' and the force) is reported when its
 #: `BASE_SIGMAS`-standard-error interval lies outside 1 / `BASE_FACTOR` .. `BASE_FACTOR` (or is positive).
 #: Built-in systems (both joints, NES, arch, magnet; noise-free, 60 and 30 dB, seeds 0-1; 60 records): -0.946 ..
@@ -407,7 +405,7 @@ BASE_FACTOR, BASE_SIGMAS, BASE_UNIQUE = 3.0, 3.0, 0.05
 
 
 def _base_scale(name: str, i: int, x, rec, dt: float, w: int) -> str | None:
-    """Rule 13b's message for DOF `i` (x its column, `w` the Savitzky-Golay window), or None."""
+    """The message for DOF `i` (x its column, `w` the Savitzky-Golay window), or None."""
     from .._recordings._derivatives import differentiate
 
     d2, d1, xs = (differentiate(x, dt, k, w) for k in (2, 1, 0))
@@ -462,7 +460,7 @@ def _scale_bracket(d, m):
 
 
 def _same_scale(r, lo, hi) -> bool:
-    """Rule 13's verdict of agreement: a positive correlation and a bracket that reaches the band
+    """The verdict of agreement: a positive correlation and a bracket that reaches the band
     1 / `UNITS_FACTOR` .. `UNITS_FACTOR`."""
     return r > 0 and abs(lo) <= UNITS_FACTOR and abs(hi) >= 1 / UNITS_FACTOR
 
@@ -474,10 +472,10 @@ def _matches(bracket) -> bool:
 
 
 def _relative_acceleration(name: str, i: int, d, a, minus, dt, w, chain: bool) -> str | None:
-    """Rule 13c: the measured `a` (DOF i's column as given, no base acceleration subtracted) read as x'' matches
+    """the measured `a` (DOF i's column as given, no base acceleration subtracted) read as x'' matches
     the second derivative of x `d` (`_same_scale` at a correlation of at least `UNITS_MIN_CORR`) and explains it
     better than a - base_acc (`minus`: its `_scale_bracket`), either by `RELATIVE_A_RATIO` in the unexplained share
-    1 - r^2 or where a - base_acc does not match (rule 13 would report a scale, or give no verdict: at 40 dB the
+    1 - r^2 or where a - base_acc does not match (the scale check would report a scale, or give no verdict: at 40 dB the
     relative joint's a - base_acc read as 1.3-1.9 x'', and the fix it gave was a factor): the file holds the relative
     acceleration. None otherwise."""
     from .._recordings._derivatives import differentiate
@@ -507,7 +505,7 @@ def _reversed_accelerometer(d, flipped_rel, dt, w) -> bool:
 
 
 def _time_unit(name: str, out: list[str], scales: dict) -> list[str]:
-    """Rule 13's messages, where v is s times x' and a is s^2 times x'' on a DOF (within `UNITS_FACTOR`), as one:
+    """The messages, where v is s times x' and a is s^2 times x'' on a DOF (within `UNITS_FACTOR`), as one:
     the time column is in 1/s seconds (t in ms: v 1000 x, a 1e6 x), and v and a are right."""
     for (i, key), (sv, kv) in sorted(scales.items()):
         if key != "v" or (i, "a") not in scales or sv <= 0:
@@ -526,7 +524,7 @@ def _time_unit(name: str, out: list[str], scales: dict) -> list[str]:
 
 
 def check_swings(dof: int, names, xs, labels, equilibria, stiffness) -> tuple[list[str], set]:
-    """Rule 2: a recording should stay in its well. It is reported as swinging between wells
+    """a recording should stay in its well. It is reported as swinging between wells
     when (a) its range (0.1-99.9 percentiles) covers the equilibrium of another well, or (b)
     the middle quarter of its range holds fewer than `SWING_GAP_FRACTION` (5 %) of its samples
     (bimodal: it sat in two places; a sine puts 16 % there, clean built-in records 34-79 %, the
@@ -564,7 +562,7 @@ def check_swings(dof: int, names, xs, labels, equilibria, stiffness) -> tuple[li
 
 
 def check_amplitude(dof: int, names, xs, labels, equilibria, skip=()) -> list[str]:
-    """Rule 6: GMR's local Taylor fits assume small vibrations; warn when a recording's
+    """GMR's local Taylor fits assume small vibrations; warn when a recording's
     amplitude exceeds `LARGE_AMPLITUDE_RATIO` (30 %) of the distance from its equilibrium to
     the nearest other one. Clean built-in data: <= 6.5 % (Kresling 3-cell chain, base cell);
     bistable joint with position-dependent damping swept at 30 degrees (still in its wells):
@@ -593,7 +591,7 @@ SCALE_RATIO = 100.0
 
 
 def check_scales(dof: int, names, xs, labels) -> list[str]:
-    """Rule 6b: one DOF's wells vibrate at amplitudes within a factor of a few of each other under one kind of
+    """one DOF's wells vibrate at amplitudes within a factor of a few of each other under one kind of
     excitation (the built-in systems: within 10, the Kresling cells' stiff deployed wells included); a factor
     above `SCALE_RATIO` (100) is more likely a file whose x is in other units (mm where the others are in m: 1000),
     which the fit would take as a well 1000 x as far and as soft (hand-made Duffing, one file in mm: 415 % restoring
@@ -620,12 +618,12 @@ def check_scales(dof: int, names, xs, labels) -> list[str]:
 
 
 def check_fit_quality(training: dict) -> list[str]:
-    """Rules 7 and 10: a training R² (model force against measured force, per recording and
+    """A training R² (model force against measured force, per recording and
     DOF) below `MIN_R2` (0.5) means the model does not explain its own data (wrong orders,
     a record that is not a small vibration, a missing input, or a global polynomial that
     blew up between the wells). Clean built-in data: R² >= 0.99999 everywhere; default
     orders on displacement-only 10 Hz sine records of the joint: -2e8 (2 noise seeds of 12;
-    the blow-up of rule 9 flags all 12); records swinging across the NES wells: -4e12.
+    the blow-up check flags all 12); records swinging across the NES wells: -4e12.
 
     `training`: recording name -> {"r2": [per DOF], ...}; where a DOF's accelerations were estimated
     on a sweep, its "r2_in_band" (both forces low-passed alike, `training_scores`) is judged instead.
@@ -645,12 +643,8 @@ def check_fit_quality(training: dict) -> list[str]:
     return out
 
 
-#: Rule 11: warn when two standard errors of the global restoring force exceed this share of it.
-MAX_RESTORING_UNCERTAINTY = 0.02
 
 
-#: rule 11b: the band written with the model (its restoring part, as rule 11 measures it) above this share
-MAX_BAND = 0.10
 
 
 def restoring_uncertainty(stiffness, covariance, x_lo: float, x_hi: float) -> float:
@@ -711,7 +705,7 @@ def escapes(stiffness, equilibria) -> list[dict]:
 
 
 def check_global_shape(dof: int, stiffness, equilibria, amplitudes, local_stiffness) -> list[str]:
-    """Rule 9: the global polynomial is measured near the recorded equilibria only; between and
+    """the global polynomial is measured near the recorded equilibria only; between and
     beyond them it is interpolated or extrapolated. Let [lo, hi] be the span of the recorded
     equilibria widened by their amplitudes, L its length. Warn when
 
@@ -775,7 +769,7 @@ def check_global_shape(dof: int, stiffness, equilibria, amplitudes, local_stiffn
 
 
 def blowup(stiffness, equilibria, local_stiffness) -> dict | None:
-    """Rule 9 (c): where |F| between the outermost equilibria exceeds `BLOWUP_RATIO` times the
+    """Where |F| between the outermost equilibria exceeds `BLOWUP_RATIO` times the
     largest local stiffness (|F'| per well) times their distance, the peak (`force`, at `x`),
     `scale` and `ratio`; None where it does not (or cannot be judged)."""
     s, eq = np.asarray(stiffness, float), np.asarray(equilibria, float)
@@ -790,12 +784,12 @@ def blowup(stiffness, equilibria, local_stiffness) -> dict | None:
             "ratio": float(force.max() / scale)}
 
 
-#: Rule 12: the data-preferred law differs from the chosen one by more than this many times the chosen
+#: the data-preferred law differs from the chosen one by more than this many times the chosen
 #: law's own 95 % half-band somewhere on the recorded range ("much more than its band").
 CONFLICT_BAND_RATIO = 2.0
 
 
-#: Rule 14: the data cannot decide the damping law where another set of velocity terms scores within this of the
+#: the data cannot decide the damping law where another set of velocity terms scores within this of the
 #: chosen one (-2 log evidence; "very strong" evidence on Kass and Raftery's scale decides, as `_joint.CONFLICT`)
 DAMPING_UNDECIDED = 10.0
 #: ... and the two laws' damping forces part by more than this share below the model's speed bound

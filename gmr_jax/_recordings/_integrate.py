@@ -56,7 +56,7 @@ def highpass_cutoff(s: np.ndarray, dt: float, times: int = 1) -> float:
 def remove_drift(y: np.ndarray, dt: float, f_hp: float, keep_mean: bool = False) -> np.ndarray:
     """y (N,) or (N, p) without its content below `f_hp`, along axis 0: the cosine-transform (DCT-II)
     coefficients of frequency k / (2 N dt) < f_hp are zeroed (with `keep_mean`, all but k = 0: the
-    band between 0 and `f_hp` goes, the mean stays; `_reconstruct/_slow.band_rows`). The DCT is the
+    band between 0 and `f_hp` goes, the mean stays). The DCT is the
     Fourier series of the record extended by its mirror image, which is continuous at both ends: no
     edge transient (a recursive high-pass this far below the sampling rate rings for most of a
     record), no phase."""
@@ -88,16 +88,6 @@ def integrate(s: np.ndarray, dt: float, f_hp: float, times: int = 1) -> np.ndarr
     for _ in range(times):
         y = CubicSpline(t, y).antiderivative()(t)
     return remove_drift(detrend(y, times), dt, f_hp)
-
-
-def apply_band(segs, a: np.ndarray) -> np.ndarray:
-    """`a` (samples, ...) of one well with each record's slow band removed (`remove_drift` with the mean
-    kept), padding left as it is; `segs`: one well's (start, stop, dt, cut-off) per record, as
-    `_reconstruct/_slow.segments` gives them."""
-    out = np.array(a, float)
-    for start, stop, dt, cut in segs:
-        out[start:stop] = remove_drift(out[start:stop], dt, cut, keep_mean=True)
-    return out
 
 
 def integrated_signals(t, v, a, base_acc, src: str):
