@@ -21,7 +21,10 @@ Each point is the Eq. (25) half-sine actuation of `basin_map`: load on for t <= 
 then free until t1 = t_off + settle_time. A step never crosses t_off: the scheduler clips it to
 land there (as diffrax's `ClipStepSizeController(jump_ts=...)` does); the half-sine is
 continuous there (sin(pi) = 0), so a first-same-as-last value stays valid across it, and the
-step proposed before the clip is kept for the step after it.
+step proposed before the clip is kept for the step after it. A point starts at rest with the
+load at sin(0) = 0, so its first-same-as-last value f(0, y0) is its model's: a fresh lane enters
+with it (the solver state diffrax leaves after any step), and the lanes never re-evaluate a first
+stage because one of them is new.
 
 With several models (`basin_probability`'s drawn models) every point also names its model:
 the lanes carry their point's coefficients, divergence box and start, so one compiled loop
@@ -277,6 +280,12 @@ def _lanes_final_states(models, settings, solver, x0s, fs, amps, mids, lo, hi, l
     y_m = jnp.concatenate([x0_l, jnp.zeros_like(x0_l)])
     start_args = ((models_l if ensemble else models), ones, zeros, ones)
     ss_m = init(zeros, ones, y_m, start_args)
+    # a first-same-as-last pair's state (first-step flag, f at the step's start): a fresh point's
+    # f(0, x0) is its model's (at rest, load sin(0) = 0), so every lane enters with the flag down
+    # (the state diffrax leaves after any step) and no attempt re-evaluates the first stage for all
+    fsal = batched_step and isinstance(ss_m, tuple) and len(ss_m) == 2 and jnp.ndim(ss_m[0]) == 0
+    if fsal:
+        ss_m = bterm.vf(zeros, y_m, start_args)
     cs_m = controller.init(bterm, zeros, ones, y_m, ones, None, None, error_order)[1]
 
     def gather(tree, m):
@@ -309,9 +318,13 @@ def _lanes_final_states(models, settings, solver, x0s, fs, amps, mids, lo, hi, l
         clipped = t + h_prop >= stop
         t_next = jnp.where(clipped, stop, t + h_prop)
         args = (ln["model"] if ensemble else models, ln["f"], ln["amp"], ln["t_off"])
-        y1, y_err, _, ss1, s_res = step(t, t_next, ln["y"], args, ln["ss"])
+        y1, y_err, _, ss1, s_res = step(t, t_next, ln["y"], args, (False, ln["ss"]) if fsal else ln["ss"])
+        if fsal:
+            ss1 = ss1[1]
         y_err = jnp.where(jnp.isnan(y_err), jnp.inf, y_err)
-        keep, nt0, nt1, _, cs1, c_res = adapt(t, t_next, ln["y"], y1, y_err, ln["cs"])
+        # (the controller scales the error by y0 alone where y1 is NaN: decided lane by lane)
+        y1_scale = jnp.where(jnp.any(jnp.isnan(y1), axis=0), ln["y"], y1)
+        keep, nt0, nt1, _, cs1, c_res = adapt(t, t_next, ln["y"], y1_scale, y_err, ln["cs"])
         keep = keep & active
         h_next = nt1 - nt0
         # a step cut short by a stop does not shrink the next one
