@@ -306,7 +306,7 @@ def resolve_batching(model, settings: SweepSettings, devices) -> str:
     raise GMRInputError(f"batching='native' cannot run here: {why}; use SweepSettings(batching='lanes')")
 
 
-LANES_CPU = 128  # lanes per CPU device ("lanes"; 2 cores, 3 cells: 64-256 within noise, 512 1.7x slower)
+LANES_CPU = 256  # lanes per CPU device ("lanes"; measured in results/basins_diffrax_numba.md)
 LANES_ACCELERATOR = 32_768  # lanes per GPU/TPU (H100, 5 cells, 1e5 points: 8192 1.6x slower, 1e5 1.2x)
 
 
