@@ -167,9 +167,10 @@ def lanes_field(model, load: str, d: int, per_lane: bool):
         tip, base = (pulse, 0.0) if load == "tip" else (0.0, pulse)
         precision = jax.lax.Precision.HIGHEST
         if chain and per_lane:
-            # m_i a_i = force_i - F_i + F_{i+1}; x_i'' = a_i - a_{i-1} (a_{-1}: the base)
+            # m_i a_i = force_i - F_i + F_{i+1}; x_i'' = a_i - a_{i-1} (a_{-1}: the base); a is two
+            # operations on a product, cheap to evaluate for each neighbour
             a = (jnp.matmul(carry.astype(dtype), force, precision=precision) + tip_row.astype(dtype) * tip) / masses
-            acc = jnp.matmul(relative.astype(dtype), a, precision=precision) - base_row.astype(dtype) * base
+            acc = a - jnp.concatenate([jnp.zeros_like(a[:1]) + base, a[:-1]])
         elif chain:
             # the same with the masses shared by the lanes: one matrix S diag(1/m) D (S e_last = e_last)
             inv = 1.0 / m.masses
