@@ -11,7 +11,8 @@ half-sine, settle 10 s, rtol 1e-6 / atol 1e-8, over a 100 x 100 (f, A) grid (f 0
 A 0.02-0.6 N), and their final states go through the same classification (`basin_map`'s).
 
 Reported per chain (3, 5, 10 cells) and damping (c = 1.0 and a lightly damped 0.3 N s/m):
-compile time (first call minus run), run time (best of `--reps` calls on new grid values),
+compile time (first call minus run), run time (best of `--reps` rounds on new grid values, each
+round running every method in turn so that a shared machine's load falls on all alike),
 steps per point (attempts, accepted and rejected), cost per trajectory-step per core
 (run time x cores / total steps), the ratio to numba's run time and the classification
 agreement. The end-to-end part times `gmr basins` in fresh processes (cold: empty compilation
@@ -98,36 +99,39 @@ def peer_configs(out, wells, settings):
     return np.asarray(cfg)
 
 
-def time_peer(model, wells, settings, nf, na, reps):
+def peer_runner(model, wells, settings):
     sweep = peer_sweep(model, wells, settings)
     x0 = wells[:, 0].copy()
-    f, a = grid(nf, na, 0.0)
-    ff, aa = np.meshgrid(f, a)
-    t = time.perf_counter()
-    out = sweep(ff.ravel(), aa.ravel(), x0)
-    first = time.perf_counter() - t
-    runs = []
-    for r in range(reps):
-        f, a = grid(nf, na, 0.1 * (r + 1))
+
+    def run(f, a):
         ff, aa = np.meshgrid(f, a)
-        t = time.perf_counter()
-        out = sweep(ff.ravel(), aa.ravel(), x0)
-        runs.append(time.perf_counter() - t)
-    return {"first": first, "run": min(runs), "out": out, "f": f, "a": a}
+        return sweep(ff.ravel(), aa.ravel(), x0)
+
+    return run
 
 
-def time_gmr(model, wells, settings, nf, na, reps, chunk=None):
+def gmr_runner(model, wells, settings, chunk=None):
+    return lambda f, a: basin_map(model, f, a, wells, settings=settings, chunk=chunk, throw=False)
+
+
+def time_interleaved(runners, nf, na, reps):
+    """Each runner's first call (compile included) on one grid, then `reps` rounds in which every
+    runner sweeps the same new grid in turn: the load of a shared machine falls on all of them
+    alike. Per runner: first call, best run and the output of the last round."""
     f, a = grid(nf, na, 0.0)
-    t = time.perf_counter()
-    basin_map(model, f, a, wells, settings=settings, chunk=chunk, throw=False)
-    first = time.perf_counter() - t
-    runs = []
+    out = {}
+    for name, run in runners.items():
+        t = time.perf_counter()
+        run(f, a)
+        out[name] = {"first": time.perf_counter() - t, "run": np.inf}
     for r in range(reps):
         f, a = grid(nf, na, 0.1 * (r + 1))
-        t = time.perf_counter()
-        bm = basin_map(model, f, a, wells, settings=settings, chunk=chunk, throw=False)
-        runs.append(time.perf_counter() - t)
-    return {"first": first, "run": min(runs), "bm": bm.value, "stats": bm.stats}
+        for name, run in runners.items():
+            t = time.perf_counter()
+            res = run(f, a)
+            out[name]["run"] = min(out[name]["run"], time.perf_counter() - t)
+            out[name]["out"] = res
+    return out
 
 
 def row(name, r, steps, n_points, peer_run=None):
@@ -192,26 +196,32 @@ def main():
     for damping in args.dampings:
         for n in cells:
             model, wells = chain(n, damping)
-            peer = time_peer(model, wells, settings, nf, na, args.reps)
+            variants = [(b, lanes, u) for b in args.batchings
+                        for lanes in (args.lanes if b == "lanes" else [None])
+                        for u in (args.unrolls if b == "lanes" else [None])]
+            runners = {"peer": peer_runner(model, wells, settings)}
+            for v in variants:
+                batching, lanes, unroll = v
+                st = SweepSettings(batching=batching, **({} if unroll is None else {"attempts_per_pass": unroll}))
+                runners[v] = gmr_runner(model, wells, st, chunk=lanes)
+            timed = time_interleaved(runners, nf, na, args.reps)
+            peer = timed["peer"]
             peer_steps = float(np.mean(peer["out"][3]))
             cfg_peer = peer_configs(peer["out"], wells, settings)
             entry = {"cells": n, "damping": damping, "points": n_points,
                      "methods": [row("numba DOPRI5", peer, peer_steps, n_points)]}
-            variants = [(b, lanes, u) for b in args.batchings
-                        for lanes in (args.lanes if b == "lanes" else [None])
-                        for u in (args.unrolls if b == "lanes" else [None])]
-            for batching, lanes, unroll in variants:
-                st = SweepSettings(batching=batching, **({} if unroll is None else {"attempts_per_pass": unroll}))
-                r = time_gmr(model, wells, st, nf, na, args.reps, chunk=lanes)
-                bm = r["bm"]
+            for v in variants:
+                batching, lanes, unroll = v
+                r = timed[v]
+                bm, stats = r["out"].value, r["out"].stats
                 steps = float(np.mean(np.asarray(bm.steps)))
-                assert r["stats"]["batching"] == batching, r["stats"]
-                label = (f"basin_map ({'default: diffrax ' + r['stats']['solver'] + ' ' if batching == 'lanes' else ''}"
-                         f"{batching}" + (f", {r['stats']['chunk']} lanes" if batching in ("lanes", "native") else ""))
+                assert stats["batching"] == batching, stats
+                label = (f"basin_map ({'default: diffrax ' + stats['solver'] + ' ' if batching == 'lanes' else ''}"
+                         f"{batching}" + (f", {stats['chunk']} lanes" if batching in ("lanes", "native") else ""))
                 label += (f", {unroll} attempts/pass" if unroll is not None else "") + ")"
                 m = row(label, r, steps, n_points, peer["run"])
                 m["agreement"] = float(np.mean(np.asarray(bm.config).ravel() == cfg_peer))
-                m["chunk"] = r["stats"]["chunk"]
+                m["chunk"] = stats["chunk"]
                 entry["methods"].append(m)
             rows.append(entry)
             print(json.dumps(entry), flush=True)
@@ -229,7 +239,7 @@ def write(args, rows, e2e, nf, na):
              f"jax {jax.__version__}, numba {numba.__version__}, {time.strftime('%Y-%m-%d')}).", "",
              f"Grid {nf} x {na} (f {bb.F_RANGE[0]}-{bb.F_RANGE[1]} Hz, A {bb.A_RANGE[0]}-{bb.A_RANGE[1]} N), "
              "tip half-sine, settle 10 s, rtol 1e-6 / atol 1e-8. Run time: best of "
-             f"{args.reps} calls on new grid values (compile apart). Cost: run time x cores / (points x steps).",
+             f"{args.reps} rounds on new grid values, every method in turn in each round (compile apart). Cost: run time x cores / (points x steps).",
              "", "| cells | c (N s/m) | method | compile s | run s | steps/point | ns/step/core | run / numba | agreement |",
              "|---|---|---|---|---|---|---|---|---|"]
     for e in rows:

@@ -37,6 +37,7 @@ g.use_cpu_cores(N_CORES)
 import jax  # noqa: E402
 
 import bench_basins as bb  # noqa: E402
+from gmr_jax._basins._probability import feeds_energy  # noqa: E402  (basin_probability's own passivity check)
 
 
 def model_with_covariance(n, rel=0.01):
@@ -50,18 +51,6 @@ def model_with_covariance(n, rel=0.01):
     return g.from_terms([bb.MASS] * n, terms, "chain", covariance=cov)
 
 
-def feeds_energy(model, x_range, n=21):
-    """True where the model's damping power F_d v is negative somewhere on the x_range x |v| <= 1 grid."""
-    lo, hi = np.asarray(x_range, float).T
-    grid = np.linspace(lo, hi, n)  # (n, dof)
-    for v in np.linspace(-1.0, 1.0, n):
-        vv = np.full(grid.shape[1], v)
-        power = np.asarray(jax.vmap(lambda x: model.damping(x, vv))(grid)) * v
-        if np.any(power < -1e-12):
-            return True
-    return False
-
-
 def loop(model, f, a, key, n, x_range, settings):
     """The per-draw loop: wells, passivity and one basin_map per draw (what basin_probability did)."""
     samples = g.sample_models(model, key, n)
@@ -71,7 +60,7 @@ def loop(model, f, a, key, n, x_range, settings):
     for k in range(n):
         m = jax.tree.map(lambda q, k=k: q[k] if hasattr(q, "shape") else q, samples)
         w = g.stable_wells(m, x_range)
-        if w.shape != w0.shape or feeds_energy(m, x_range):
+        if w.shape != w0.shape or feeds_energy(m, np.asarray(w), x_range):
             continue
         configs.append(np.asarray(g.basin_map(m, f, a, w, settings=settings, throw=False).value.config))
     return np.asarray(mean.value.config), np.stack(configs)

@@ -262,7 +262,7 @@ def test_default_chunk_scales_with_the_number_of_cells():
     from gmr_jax._basins._sweep import default_chunk
 
     assert [default_chunk(d) for d in (1, 3, 5, 10, 40)] == [512, 512, 256, 128, 64]
-    assert default_chunk(5, "lanes") == 128 and default_chunk(5, "lanes", accelerator=True) == 32_768
+    assert default_chunk(5, "lanes") == 256 and default_chunk(5, "lanes", accelerator=True) == 32_768
 
 
 # -- lanes batching: per-point step control in one vectorised loop ---------------------------

@@ -21,7 +21,10 @@ Each point is the Eq. (25) half-sine actuation of `basin_map`: load on for t <= 
 then free until t1 = t_off + settle_time. A step never crosses t_off: the scheduler clips it to
 land there (as diffrax's `ClipStepSizeController(jump_ts=...)` does); the half-sine is
 continuous there (sin(pi) = 0), so a first-same-as-last value stays valid across it, and the
-step proposed before the clip is kept for the step after it.
+step proposed before the clip is kept for the step after it. A point starts at rest with the
+load at sin(0) = 0, so its first-same-as-last value f(0, y0) is its model's: a fresh lane enters
+with it (the solver state diffrax leaves after any step), and the lanes never re-evaluate a first
+stage because one of them is new.
 
 With several models (`basin_probability`'s drawn models) every point also names its model:
 the lanes carry their point's coefficients, divergence box and start, so one compiled loop
@@ -44,7 +47,6 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .._fit._library import signed_power
 from .._model._model import GlobalModel
 from .._solution import RESULTS
 from .._topology import Chain, Independent
@@ -134,36 +136,56 @@ def lanes_field(model, load: str, d: int, per_lane: bool):
         return lambda t, y, args: jax.vmap(one, in_axes=(-1, -1, (model_axes, -1, -1, -1)), out_axes=-1)(
             jnp.broadcast_to(t, args[1].shape), y, args)
     chain = isinstance(model.topology, Chain)
+    # the chain's carried forces as constant matrices on the DOF axis: (D F)_i = F_{i+1} - F_i and
+    # (S a)_i = a_i - a_{i-1}; a product materialises F once (shifted copies made XLA evaluate the
+    # polynomials once per neighbour)
+    eye = np.eye(d)
+    carry = jnp.asarray(np.eye(d, k=1) - eye)
+    relative = jnp.asarray(eye - np.eye(d, k=-1))
+    tip_row = jnp.asarray(np.eye(d)[:, -1:])  # (dof, 1): the load on the last mass
+    base_row = jnp.asarray(np.eye(d)[:, :1]) if chain else jnp.ones((d, 1))
+
+    def horner(coef, z):
+        """sum_k coef[:, k] z^k, highest power first (one multiply-add per order)."""
+        out = coef[:, -1] + jnp.zeros_like(z)
+        for k in range(coef.shape[1] - 2, -1, -1):
+            out = out * z + coef[:, k]
+        return out
 
     def field(t, y, args):
         m, f, amp, t_off = args
         x, v = y
         lane = (lambda a: a) if per_lane else (lambda a: a[..., None])
         K, B, C, masses = (lane(a) for a in (m.stiffness, m.velocity_damping, m.position_damping, m.masses))
-
-        def horner(coef, z):
-            out = jnp.zeros_like(z)
-            for k in range(coef.shape[1] - 1, -1, -1):
-                out = out * z + coef[:, k]
-            return out
-
+        dtype = x.dtype
         force = horner(K, x) + horner(C, x) * v
-        for j in range(B.shape[1]):
-            force = force + B[:, j] * signed_power(v, j, m.sign_eps)
+        if B.shape[1]:
+            # sum_j B_j sgn(v)|v|^j = sgn(v) sum_j B_j |v|^j (sgn smoothed to tanh(v / eps) when eps > 0)
+            s = jnp.sign(v) if m.sign_eps == 0.0 else jnp.tanh(v / m.sign_eps)
+            force = force + s * horner(B, jnp.abs(v))
         pulse = _pulse(t, f, amp, t_off)
-        zero = jnp.zeros_like(pulse)
-        base, tip = (zero, pulse) if load == "tip" else (pulse, zero)
-        load_ = jnp.concatenate([jnp.zeros_like(force[:-1]), tip[None] + jnp.zeros_like(force[-1:])])
-        if chain:
-            # m_i a_i = force_i - F_i + F_{i+1}; x_i'' = a_i - a_{i-1} (a_{-1}: the base)
-            f_next = jnp.concatenate([force[1:], jnp.zeros_like(force[:1])])
-            a = (load_ - force + f_next) / masses
-            acc = a - jnp.concatenate([base[None] + jnp.zeros_like(a[:1]), a[:-1]])
+        tip, base = (pulse, 0.0) if load == "tip" else (0.0, pulse)
+        precision = jax.lax.Precision.HIGHEST
+        if chain and per_lane:
+            # m_i a_i = force_i - F_i + F_{i+1}; x_i'' = a_i - a_{i-1} (a_{-1}: the base); a is two
+            # operations on a product, cheap to evaluate for each neighbour
+            a = (jnp.matmul(carry.astype(dtype), force, precision=precision) + tip_row.astype(dtype) * tip) / masses
+            acc = a - jnp.concatenate([jnp.zeros_like(a[:1]) + base, a[:-1]])
+        elif chain:
+            # the same with the masses shared by the lanes: one matrix S diag(1/m) D (S e_last = e_last)
+            inv = 1.0 / m.masses
+            acc = (jnp.matmul(relative.astype(dtype) @ (inv[:, None] * carry.astype(dtype)), force, precision=precision)
+                   + tip_row.astype(dtype) * (inv[-1] * tip) - base_row.astype(dtype) * base)
         else:
-            acc = (load_ - force) / masses - base[None]
+            acc = (tip_row.astype(dtype) * tip - force) / masses - base_row.astype(dtype) * base
         return v, acc
 
     return field
+
+
+def _stacked(field, d: int):
+    """`field` on the state (x; v) as one array (2 dof, ...) instead of the pair (x, v)."""
+    return lambda t, y, args: jnp.concatenate(field(t, (y[:d], y[d:]), args))
 
 
 def _lane_rms(tree):
@@ -213,8 +235,10 @@ def _lanes_final_states(models, settings, solver, x0s, fs, amps, mids, lo, hi, l
     # other solver (an implicit one solves a nonlinear system per step) is vmapped lane by lane
     batched_step = isinstance(solver, dfx.AbstractERK)
     per_lane = ensemble
-    bterm = dfx.ODETerm(lanes_field(models, settings.load, d, per_lane))
-    term1 = dfx.ODETerm(half_sine_field(settings.load, d))
+    # the state of a lane is one array (x; v) (2 dof, B): each stage's combination, the error
+    # estimate and the controller's norm are one array operation, not one per component
+    bterm = dfx.ODETerm(_stacked(lanes_field(models, settings.load, d, per_lane), d))
+    term1 = dfx.ODETerm(_stacked(half_sine_field(settings.load, d), d))
     error_order = solver.error_order(bterm)
     if isinstance(solver, dfx.AbstractRungeKutta) and solver.scan_kind is None:
         # the stages in a plain loop (the same arithmetic): forward-mode derivatives pass through it
@@ -254,9 +278,15 @@ def _lanes_final_states(models, settings, solver, x0s, fs, amps, mids, lo, hi, l
     # every point starts at rest in its model's x0 with its load at sin(0) = 0: the solver's and the
     # controller's first states depend on the model only (one per model, gathered into the lanes)
     ones, zeros = jnp.ones(m_count, dtype), jnp.zeros(m_count, dtype)
-    y_m = (x0_l, jnp.zeros_like(x0_l))
+    y_m = jnp.concatenate([x0_l, jnp.zeros_like(x0_l)])
     start_args = ((models_l if ensemble else models), ones, zeros, ones)
     ss_m = init(zeros, ones, y_m, start_args)
+    # a first-same-as-last pair's state (first-step flag, f at the step's start): a fresh point's
+    # f(0, x0) is its model's (at rest, load sin(0) = 0), so every lane enters with the flag down
+    # (the state diffrax leaves after any step) and no attempt re-evaluates the first stage for all
+    fsal = batched_step and isinstance(ss_m, tuple) and len(ss_m) == 2 and jnp.ndim(ss_m[0]) == 0
+    if fsal:
+        ss_m = bterm.vf(zeros, y_m, start_args)
     cs_m = controller.init(bterm, zeros, ones, y_m, ones, None, None, error_order)[1]
 
     def gather(tree, m):
@@ -271,7 +301,7 @@ def _lanes_final_states(models, settings, solver, x0s, fs, amps, mids, lo, hi, l
         h0 = settings.integrator.dt0
         h0 = 1e-2 * jnp.minimum(t_off, 1.0) if h0 is None else jnp.full_like(f, h0)
         x = x0_l[:, m]
-        lane = dict(idx=idx, y=(x, jnp.zeros_like(x)), ss=gather(ss_m, m), cs=gather(cs_m, m), t=jnp.zeros_like(f),
+        lane = dict(idx=idx, y=jnp.concatenate([x, jnp.zeros_like(x)]), ss=gather(ss_m, m), cs=gather(cs_m, m), t=jnp.zeros_like(f),
                     h=h0, steps=jnp.zeros(idx.shape, jnp.int32), f=f, amp=amps[k], t_off=t_off, t1=t_off + settle,
                     lo=lo_l[:, m], hi=hi_l[:, m], fin=jnp.zeros(idx.shape, bool),
                     code=jnp.full(idx.shape, fail_, jnp.int32))
@@ -289,20 +319,24 @@ def _lanes_final_states(models, settings, solver, x0s, fs, amps, mids, lo, hi, l
         clipped = t + h_prop >= stop
         t_next = jnp.where(clipped, stop, t + h_prop)
         args = (ln["model"] if ensemble else models, ln["f"], ln["amp"], ln["t_off"])
-        y1, y_err, _, ss1, s_res = step(t, t_next, ln["y"], args, ln["ss"])
-        y_err = jax.tree.map(lambda e: jnp.where(jnp.isnan(e), jnp.inf, e), y_err)
-        keep, nt0, nt1, _, cs1, c_res = adapt(t, t_next, ln["y"], y1, y_err, ln["cs"])
+        y1, y_err, _, ss1, s_res = step(t, t_next, ln["y"], args, (False, ln["ss"]) if fsal else ln["ss"])
+        if fsal:
+            ss1 = ss1[1]
+        y_err = jnp.where(jnp.isnan(y_err), jnp.inf, y_err)
+        # (the controller scales the error by y0 alone where y1 is NaN: decided lane by lane)
+        y1_scale = jnp.where(jnp.any(jnp.isnan(y1), axis=0), ln["y"], y1)
+        keep, nt0, nt1, _, cs1, c_res = adapt(t, t_next, ln["y"], y1_scale, y_err, ln["cs"])
         keep = keep & active
         h_next = nt1 - nt0
         # a step cut short by a stop does not shrink the next one
         h_next = jnp.where(keep & clipped, jnp.maximum(h_next, h_prop), h_next)
         sel = lambda new, old: jax.tree.map(lambda a, o: jnp.where(keep, a, o), new, old)  # noqa: E731
-        y = sel(y1, ln["y"])
+        y = jnp.where(keep, y1, ln["y"])
         t_new = jnp.where(keep, t_next, t)
         steps = ln["steps"] + active.astype(jnp.int32)
-        x = y[0]
+        x = y[:d]
         left = jnp.any((x < ln["lo"]) | (x > ln["hi"]), axis=0)
-        finite = jnp.all(jnp.isfinite(y[0]), axis=0) & jnp.all(jnp.isfinite(y[1]), axis=0)
+        finite = jnp.all(jnp.isfinite(y), axis=0)
         bad = ~finite | (t_new + h_next <= t_new)
         res = jnp.where(keep, _promote(s_res), ok_)
         res = jnp.where(res == ok_, _promote(c_res), res)
@@ -328,7 +362,7 @@ def _lanes_final_states(models, settings, solver, x0s, fs, amps, mids, lo, hi, l
         fin = lane["fin"]
         # finished points write their answer (other lanes write nowhere: index n is dropped)
         where = jnp.where(fin, lane["idx"], n)
-        x, v = lane["y"]
+        x, v = lane["y"][:d], lane["y"][d:]
         out = (out[0].at[where].set(x.T, mode="drop"), out[1].at[where].set(v.T, mode="drop"),
                out[2].at[where].set(lane["code"], mode="drop"), out[3].at[where].set(lane["steps"], mode="drop"))
         # free lanes take the next points of the queue

@@ -55,7 +55,7 @@ class SweepSettings(eqx.Module):
       of 16 points at a time in vector registers, all CPU cores through one shared queue, an
       integral controller of its own; `chunk` and `devices` do not apply). It needs a C compiler
       (`$CC`, cc, gcc or clang), a `GlobalModel` on a chain or independent DOFs, float64, one
-      process and an explicit pair (Tsit5, Dopri5, Dopri8); measured 4-7x faster than
+      process and an explicit pair (Tsit5, Dopri5, Dopri8); measured 3-5x faster than
       "lanes" on a CPU (`results/basins_diffrax.md`). "joint": each
       chunk integrated as one ODE with one step size and a max-over-members error norm (every
       member meets the tolerance; see `_joint`), a chunk whose joint solve fails re-run member
@@ -306,7 +306,7 @@ def resolve_batching(model, settings: SweepSettings, devices) -> str:
     raise GMRInputError(f"batching='native' cannot run here: {why}; use SweepSettings(batching='lanes')")
 
 
-LANES_CPU = 128  # lanes per CPU device ("lanes"; 2 cores, 3 cells: 64-256 within noise, 512 1.7x slower)
+LANES_CPU = 256  # lanes per CPU device ("lanes"; measured in results/basins_diffrax_numba.md)
 LANES_ACCELERATOR = 32_768  # lanes per GPU/TPU (H100, 5 cells, 1e5 points: 8192 1.6x slower, 1e5 1.2x)
 
 

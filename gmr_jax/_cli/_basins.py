@@ -33,7 +33,7 @@ def register(sub):
                    help="auto (default) = lanes: diffrax's solver and step-size controller, each point with its own "
                         "step control, in lanes that take the next point when one is done (any model, CPUs and "
                         "GPUs); native: an opt-in C kernel generated from the model (the same queue, 16 points at a "
-                        "time in vector registers, all cores, 4-7x faster on a CPU; needs a C compiler, float64 "
+                        "time in vector registers, all cores, 3-5x faster on a CPU; needs a C compiler, float64 "
                         "polynomial models, tsit5/dopri5/dopri8); joint: each chunk as one ODE with a shared step; "
                         "member: vmap of one solve per point")
     b.add_argument("--solver", choices=["tsit5", "dopri5", "dopri8", "kvaerno5"], default="tsit5",
