@@ -37,7 +37,6 @@ g.use_cpu_cores(N_CORES)
 import jax  # noqa: E402
 
 import bench_basins as bb  # noqa: E402
-from gmr_jax._basins._probability import feeds_energy  # noqa: E402  (basin_probability's own passivity check)
 
 
 def model_with_covariance(n, rel=0.01):
@@ -49,6 +48,18 @@ def model_with_covariance(n, rel=0.01):
         cov.append({"dof": i, "terms": [[t["physics"], t["order"]] for t in mine],
                     "matrix": np.diag([(rel * t["coefficient"]) ** 2 for t in mine]).tolist()})
     return g.from_terms([bb.MASS] * n, terms, "chain", covariance=cov)
+
+
+def feeds_energy(model, wells, x_range, n=21):
+    """True where the model's damping power F_d v is negative somewhere on the x_range x |v| <= 1 grid."""
+    lo, hi = np.broadcast_to(np.asarray(x_range, float), (model.n_dof, 2)).T
+    grid = np.linspace(lo, hi, n)  # (n, dof)
+    for v in np.linspace(-1.0, 1.0, n):
+        vv = np.full(grid.shape[1], v)
+        power = np.asarray(jax.vmap(lambda x: model.damping(x, vv))(grid)) * v
+        if np.any(power < -1e-12):
+            return True
+    return False
 
 
 def loop(model, f, a, key, n, x_range, settings):
