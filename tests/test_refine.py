@@ -298,14 +298,14 @@ def test_a_refinement_worse_on_the_holdout_is_warned():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="refine moves monomial coefficients: on the default route's degree-13 law "
-                   "Levenberg-Marquardt runs out of its iterations")
-def test_refining_on_single_well_records_can_spoil_the_global_law(tmp_path, capsys):
+@pytest.mark.xfail(strict=True, reason="the default's law from one chirp per well fails 39 of the cross-well "
+                   "holdout's 59 windows before refinement, 46 after")
+def test_refining_on_single_well_records_keeps_the_global_law(tmp_path, capsys):
     """A non-polynomial double well (F = -2x + 1.5x^3 + 0.3 tanh(3x) x^2) fitted by `gmr fit` from one
-    chirp record per well, then refined on the same records with a cross-well holdout: windows
-    started from the recorded (noisy) state move the global law away from the truth between the
-    wells (restoring error against the truth, NumPy) and the holdout says so (`refine` warns,
-    `gmr refine --starts measured` prints it); the default fitted starts keep the law."""
+    chirp record per well, then refined on the same records with a cross-well holdout: single-well
+    windows cannot fix the law between the wells, and with the fit's posterior as the prior the
+    refinement does not move it there, whether its windows start from the recorded (noisy) states or
+    from fitted ones (restoring error against the truth, NumPy), and the holdout is not made worse."""
     from scipy.integrate import solve_ivp
 
     from gmr_jax._cli._main import main
@@ -338,22 +338,20 @@ def test_refining_on_single_well_records_can_spoil_the_global_law(tmp_path, caps
     hold = record(lambda tt: 0.5 * np.sin(2 * np.pi * 0.25 * tt), wells[0], "cross", with_a=False)
     assert main(["fit", *recs, "--out", str(tmp_path / "m.json"), "--no-figure", "--no-progress"]) == 0
     train, held = [g.load_recording(r) for r in recs], [g.load_recording(hold)]
-    with pytest.warns(g.GMRDataWarning, match="worse than the given one on the holdout"):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", g.GMRDataWarning)  # neither is worse on the holdout
         sol = g.refine(g.load_model(tmp_path / "m.json"), train, holdout=held,
                        settings=g.RefineSettings(starts="measured"))
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", g.GMRDataWarning)  # the default is not worse on the holdout
         default = g.refine(g.load_model(tmp_path / "m.json"), train, holdout=held)
     xs = np.linspace(wells[0] - 0.2, wells[1] + 0.2, 201)
     err = {k: np.linalg.norm(np.polynomial.polynomial.polyval(xs, np.asarray(m.stiffness)[0]) - force(xs))
            / np.linalg.norm(force(xs)) for k, m in (("fit", g.load_model(tmp_path / "m.json")), ("measured", sol.value),
                                                     ("estimated", default.value))}
-    # starts taken from the noisy record bend the law (1.9 % -> 5.1 %); fitted starts keep it (2.0 %)
-    assert err["measured"] > 1.5 * err["fit"] and err["estimated"] < 1.2 * err["fit"], err
+    assert err["measured"] < 1.2 * err["fit"] and err["estimated"] < 1.2 * err["fit"], err
     capsys.readouterr()
     assert main(["refine", str(tmp_path / "m.json"), *recs, "--holdout", hold, "--out", str(tmp_path / "r.json"),
                  "--starts", "measured", "--no-progress"]) == 0
-    assert "gmr refine: warning: the refined model is worse" in capsys.readouterr().out
+    assert "worse" not in capsys.readouterr().out
 
 
 @pytest.mark.slow  # a refine and two free runs through the CLI (~45 s)

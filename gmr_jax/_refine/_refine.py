@@ -129,8 +129,11 @@ def free_mask(model: GlobalModel, free=None) -> dict[str, np.ndarray]:
 
 
 class ShootingProblem(eqx.Module):
-    """The least-squares problem of `refine`: parameters p (free coefficients divided by their
-    starting magnitude), residuals = (simulated - measured x) / std over all windows.
+    """The least-squares problem of `refine`: the free coefficients are `offset + transform @ p`
+    (p = 0 at the start; `transform` whitens the model's covariance of the free coefficients, so
+    that a unit step moves them by one posterior standard deviation along each principal
+    direction, or scales each by its starting magnitude where the model has no covariance),
+    residuals = (simulated - measured x) / std over all windows.
 
     `residuals(p, windows)` uses the default `RecursiveCheckpointAdjoint` (use it with
     `jax.grad`); `__call__(p, windows)` is the same function with a custom JVP that forms each
@@ -138,15 +141,19 @@ class ShootingProblem(eqx.Module):
     linearises."""
 
     model: GlobalModel
-    scales: Float[Array, " free"]
+    offset: Float[Array, " free"]
+    transform: Float[Array, "free free"]
     index: tuple = eqx.field(static=True)  # per physics: (rows, cols) tuples
     stride: int = eqx.field(static=True)
     jac: str = eqx.field(static=True)
     integrator: Integrator
     estimated: bool = eqx.field(static=True, default=True)
+    #: weight of the prior residuals p (0: none): with a whitening `transform`, ||r||^2 + prior^2 ||p||^2
+    #: is the negative log posterior at residual noise variance prior^2
+    prior: Float[Array, ""] | float = 0.0
 
     def to_model(self, p: Float[Array, " free"]) -> GlobalModel:
-        coef = p * self.scales
+        coef = self.offset + self.transform @ p
         model, start = self.model, 0
         for phys, (rows, cols) in zip(PHYSICS, self.index):
             n = len(rows)
@@ -174,7 +181,8 @@ class ShootingProblem(eqx.Module):
         squared norm is then exact (the starts are stationary), the Jacobian is not (that is
         `residuals_and_jacobian`'s projected one)."""
         parts = [self._window_residuals(p, w, adjoint) for w in windows]
-        return jnp.concatenate([r.reshape(-1) for r, _ in parts]), jnp.concatenate([ok for _, ok in parts])
+        return (jnp.concatenate([r.reshape(-1) for r, _ in parts] + [self.prior * p]),
+                jnp.concatenate([ok for _, ok in parts]))
 
     def residuals_and_jacobian(self, p, windows: list[Windows]):
         """Residuals (R,) and their Jacobian (R, free), window by window. With estimated starts the
@@ -204,6 +212,8 @@ class ShootingProblem(eqx.Module):
             j, r = jax.vmap(window)(w, starts)
             rs.append(r.reshape(-1))
             js.append(j.reshape(-1, p.shape[0]))
+        rs.append(self.prior * p)
+        js.append(self.prior * jnp.eye(p.shape[0]))
         return jnp.concatenate(rs), jnp.concatenate(js)
 
     def __call__(self, p, windows):
@@ -227,7 +237,7 @@ def _residual_fn_jvp(primals, tangents):
 def shooting_problem(
     model: GlobalModel, recordings, free=None, settings: RefineSettings = RefineSettings()
 ) -> tuple[ShootingProblem, Float[Array, " free"], list[Windows]]:
-    """Build the problem `refine` solves: (problem, p0 (all ones), windows). The model is the
+    """Build the problem `refine` solves: (problem, p0 (zeros), windows). The model is the
     one optimised (with the sgn(v) surrogate where applicable)."""
     if not isinstance(model, GlobalModel):
         raise GMRInputError(f"refine needs a GlobalModel (polynomial coefficients), got {type(model).__name__}")
@@ -241,17 +251,42 @@ def shooting_problem(
         c = np.abs(np.asarray(getattr(model, phys))[rows, cols])
         scales.append(np.where(c > 0, c, 1.0))
     scales = np.concatenate(scales)
+    coef0 = np.concatenate([np.asarray(getattr(model, ph))[np.asarray(r, int), np.asarray(c, int)]
+                            if len(r) else np.zeros(0) for ph, (r, c) in zip(PHYSICS, index)])
+    transform = _whitening(model, index)
+    prior = 0.0 if transform is None else 1.0  # its weight set by `refine` from the starting residuals
+    transform = np.diag(scales) if transform is None else transform
     m = dataclasses.replace(model, stderr=None, covariance=None)
     if _uses_sign(model, mask):
         v_rms = float(np.sqrt(np.mean(np.concatenate([np.asarray(r.v).ravel() ** 2 for r in recs]))))
         m = m.with_sign_eps(settings.sign_eps * max(v_rms, 1e-300))
-    problem = ShootingProblem(m, jnp.asarray(scales), tuple(index), settings.stride, settings.jac, settings.integrator,
-                              check_starts(settings.starts))
-    # p = coefficient / scale: the sign of each nonzero start, 0 for a zero start
-    signs = np.concatenate([np.sign(np.asarray(getattr(model, ph))[np.asarray(r, int), np.asarray(c, int)])
-                            if len(r) else np.zeros(0) for ph, (r, c) in zip(PHYSICS, index)])
-    p0 = jnp.asarray(signs, dtype=jnp.float64)
-    return problem, p0, windows
+    problem = ShootingProblem(m, jnp.asarray(coef0, float), jnp.asarray(transform, float), tuple(index),
+                              settings.stride, settings.jac, settings.integrator, check_starts(settings.starts),
+                              jnp.asarray(prior))
+    return problem, jnp.zeros(coef0.shape[0]), windows
+
+
+#: eigenvalues of the free coefficients' covariance are floored at this share of the largest
+COVARIANCE_FLOOR = 1e-12
+
+
+def _whitening(model: GlobalModel, index) -> np.ndarray | None:
+    """T with T T' = C, the model's covariance of the free coefficients (`index`), its
+    eigenvalues floored at `COVARIANCE_FLOOR` of the largest; None without a usable covariance."""
+    if model.covariance is None:
+        return None
+    widths = [np.shape(getattr(model, ph))[-1] for ph in PHYSICS]
+    first = np.cumsum([0] + widths[:-1])
+    dof = np.concatenate([np.asarray(r, int) for r, _ in index])
+    flat = np.concatenate([first[j] + np.asarray(c, int) for j, (_, c) in enumerate(index)])
+    cov = np.asarray(model.covariance, float)
+    C = np.where(dof[:, None] == dof[None, :], cov[dof[:, None], flat[:, None], flat[None, :]], 0.0)
+    if not np.all(np.isfinite(C)):
+        return None
+    lam, V = np.linalg.eigh(0.5 * (C + C.T))
+    if not lam.max() > 0:
+        return None
+    return V * np.sqrt(np.maximum(lam, COVARIANCE_FLOOR * lam.max()))[None, :]
 
 
 def _uses_sign(model: GlobalModel, mask) -> bool:
@@ -286,8 +321,11 @@ def refine(
     (diffrax, Tsit5) under the measured inputs from its start state (by default the one that fits
     its samples best, `settings.starts`; or the recorded (x, v) at its first sample), and
     the residuals (simulated - measured x, per DOF over the recording's std) of all windows are
-    minimised by `settings.solver` (Levenberg-Marquardt) over the free coefficients, each
-    scaled by its starting magnitude. Windows that fail or diverge get a constant penalty
+    minimised by `settings.solver` (Levenberg-Marquardt) over the free coefficients. Where the
+    model has a covariance (`reconstruct` gives one), its posterior is the fit's prior: the
+    objective is ||r||^2 + s^2 ||L^-1 (c - c_0)||^2 (L L' the covariance, s^2 the starting
+    residuals' mean square), so a coefficient moves only as far as the trajectories support;
+    otherwise each is scaled by its starting magnitude. Windows that fail or diverge get a constant penalty
     residual (no NaN gradients); sgn(v) terms are smoothed during the fit (see
     `RefineSettings.sign_eps`).
 
@@ -314,6 +352,8 @@ def refine(
     problem, p0, windows = shooting_problem(model, recordings, free, settings)
     r0, ok0 = _residuals(problem, p0, windows)
     cost0 = float(jnp.sum(r0**2))
+    # the model's posterior as the prior, at the noise variance of the starting residuals
+    problem = eqx.tree_at(lambda q: q.prior, problem, problem.prior * np.sqrt(cost0 / max(r0.size - p0.size, 1)))
     p, result, steps, cost1, ok = _solve(problem, p0, windows, settings.solver, settings.max_iterations)
     refined = dataclasses.replace(problem.to_model(p), sign_eps=0.0, stderr=None, covariance=None)
     exact0 = dataclasses.replace(model, sign_eps=0.0)
