@@ -19,8 +19,9 @@ b_j ~ N(0, s_bj^2), c_j ~ N(0, s_cj^2), each damping term with its own scale (au
 relevance determination, sparse Bayesian learning: a term the data do not need gets a scale
 near zero and drops out, so the law extrapolates beyond the recorded speeds with the terms the
 records hold, not with a smooth mixture of every power). The scales, the decay and the wells'
-noise variances maximise the log marginal likelihood (MacKay's evidence) times a wide
-hyperprior; the posterior mean and covariance then give the law, its standard errors and its
+noise variances maximise the log marginal likelihood (MacKay's evidence) times a hyperprior,
+wide on the restoring law's scale and decay, flat on the damping scales (a scale the evidence
+drives to zero switches its term off); the posterior mean and covariance then give the law, its standard errors and its
 band, one covariance for all three.
 """
 
@@ -239,9 +240,8 @@ def log_evidence(h: Hyper, stats, basis: Basis, active):
     return _solve(h, stats, basis, active)[3]
 
 
-#: standard deviations of the hyperprior on the log scales and the logit decays: wide, so that the
-#: evidence decides, and proper, so that a family or an order the data do not need has a finite
-#: optimum instead of a scale that drifts to zero
+#: standard deviations of the hyperprior on the restoring law's log scale and logit decay: wide, so
+#: that the evidence decides, and proper, so that orders the data do not need have a finite optimum
 HYPER_SD = (10.0, 15.0)
 
 
@@ -253,10 +253,10 @@ TOL = 1e-6
 FLAT = 1e-3
 
 def log_hyperprior(h: Hyper):
-    """log p(hyperparameters) up to a constant: independent normals on the log scales and the
-    logit decay (`HYPER_SD`), flat on the log noise variances."""
-    scales = jnp.append(h.log_ard, h.log_scale)
-    return -0.5 * (jnp.sum((scales / HYPER_SD[0]) ** 2) + (h.logit_decay / HYPER_SD[1]) ** 2)
+    """log p(hyperparameters) up to a constant: independent normals on the restoring law's log
+    scale and logit decay (`HYPER_SD`), flat on the damping terms' log scales (sparse Bayesian
+    learning: the evidence can switch a term off) and on the log noise variances."""
+    return -0.5 * ((h.log_scale / HYPER_SD[0]) ** 2 + (h.logit_decay / HYPER_SD[1]) ** 2)
 
 
 def _initial(stats, basis: Basis, decay: float) -> Hyper:
