@@ -179,8 +179,8 @@ def estimate(recs, masses, topology, settings: ReconstructSettings, wells, say, 
             "coordination": "evidence",
             "width": width,
             "degree_weight": np.asarray(post.weight).tolist(),
-            "degree": int(np.argmax(np.asarray(post.weight))) + 1,
-            "K_r": int(np.argmax(np.asarray(post.weight))) + 1,
+            "degree": (degree := int(np.argmax(np.asarray(post.weight))) + 1),
+            "K_r": degree,
             "K_d": int(settings.damping_order),
             "prior_scale": np.exp(np.asarray(h.log_scale)).tolist(),
             "prior_decay": np.asarray(jax.nn.sigmoid(h.logit_decay)).tolist(),
@@ -224,17 +224,39 @@ def designs(recs, wells) -> list[list[int]]:
     return [m for m in by.values() if len(m) >= 2]
 
 
-def model_from(masses, topology, blocks, covs) -> GlobalModel:
-    """The `GlobalModel` whose standard errors and covariance are the posterior's."""
-    stiff, vel, pos = (np.stack([b[j] for b in blocks]) for j in range(3))
-    cov = np.stack(covs)
-    se = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None))
-    k, dv = stiff.shape[1], vel.shape[1]
-    stderr = {STIFFNESS: jnp.asarray(se[:, :k]), VELOCITY_DAMPING: jnp.asarray(se[:, k: k + dv]),
-              POSITION_DAMPING: jnp.asarray(se[:, k + dv:])}
+def stack_padded(rows) -> np.ndarray:
+    """Stack per-DOF coefficient vectors of different lengths, zero-padded to the longest."""
+    n = max(np.asarray(r).shape[0] for r in rows)
+    return np.stack([np.pad(np.asarray(r, float), (0, n - np.asarray(r).shape[0])) for r in rows])
+
+
+def stack_covariances(covs, blocks) -> np.ndarray:
+    """Per-DOF covariances of (stiffness, velocity_damping, position_damping) concatenated at
+    each DOF's own widths, placed into the padded layout of `GlobalModel.covariance`."""
+    widths = [[np.asarray(b).shape[0] for b in block] for block in blocks]
+    top = np.max(np.array(widths), axis=0)
+    out = np.zeros((len(covs), int(top.sum()), int(top.sum())))
+    for i, (c, w) in enumerate(zip(covs, widths)):
+        idx = np.concatenate([off + np.arange(n) for off, n in zip(np.cumsum([0, *top[:-1]]), w)])
+        out[i][np.ix_(idx, idx)] = np.asarray(c, float)
+    return out
+
+
+def model_from(masses, topology, blocks, covs=None) -> GlobalModel:
+    """The `GlobalModel` of per-DOF `blocks` (stiffness, velocity damping, position damping),
+    padded to one width; with `covs` (per DOF, over its own blocks), its covariance and the
+    standard errors from that covariance's diagonal."""
+    stiff, vel, pos = (stack_padded([b[j] for b in blocks]) for j in range(3))
+    stderr = cov = None
+    if covs is not None:
+        cov = stack_covariances(covs, blocks)
+        se = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None))
+        k, dv = stiff.shape[1], vel.shape[1]
+        stderr = {STIFFNESS: jnp.asarray(se[:, :k]), VELOCITY_DAMPING: jnp.asarray(se[:, k: k + dv]),
+                  POSITION_DAMPING: jnp.asarray(se[:, k + dv:])}
     return GlobalModel(masses=jnp.asarray(masses), stiffness=jnp.asarray(stiff), velocity_damping=jnp.asarray(vel),
                        position_damping=jnp.asarray(pos), topology=topology, stderr=stderr,
-                       covariance=jnp.asarray(cov))
+                       covariance=None if cov is None else jnp.asarray(cov))
 
 
 def equilibria(recs, i: int, groups) -> np.ndarray:

@@ -35,7 +35,7 @@ from .._recordings._recording import Recording, length_unit, regression_targets,
 from .._solution import RESULTS, GMRComputationError, Solution, as_result
 from .._topology import Graph, as_topology
 from . import _sanity
-from ._estimator import ReconstructSettings, diagnose, equilibria, estimate
+from ._estimator import ReconstructSettings, diagnose, equilibria, estimate, model_from
 from ._sanity import GMRDataWarning
 
 #: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
@@ -208,36 +208,6 @@ def _solution(model, failure: _Failure, method, library, reports, training, warn
     return Solution(value=model, result=failure.code, stats=stats)
 
 
-def stack_padded(rows) -> np.ndarray:
-    """Stack per-DOF coefficient vectors of different lengths, zero-padded to the longest."""
-    n = max(np.asarray(r).shape[0] for r in rows)
-    return np.stack([np.pad(np.asarray(r, float), (0, n - np.asarray(r).shape[0])) for r in rows])
-
-
-def stack_covariances(covs, stiff, vdamp, pdamp) -> np.ndarray:
-    """Per-DOF covariances of (stiffness, velocity_damping, position_damping) concatenated at
-    each DOF's own widths, placed into the padded layout of `GlobalModel.covariance`."""
-    widths = [[np.asarray(b[i]).shape[0] for b in (stiff, vdamp, pdamp)] for i in range(len(covs))]
-    top = np.max(np.array(widths), axis=0)
-    out = np.zeros((len(covs), int(top.sum()), int(top.sum())))
-    for i, (c, w) in enumerate(zip(covs, widths)):
-        idx = np.concatenate([off + np.arange(n) for off, n in zip(np.cumsum([0, *top[:-1]]), w)])
-        out[i][np.ix_(idx, idx)] = np.asarray(c, float)
-    return out
-
-
-def _model_from_blocks(masses, topology, stiff, vdamp, pdamp, stderr=None, covariance=None) -> GlobalModel:
-    return GlobalModel(
-        masses=jnp.asarray(masses),
-        stiffness=jnp.asarray(stack_padded(stiff)),
-        velocity_damping=jnp.asarray(stack_padded(vdamp)),
-        position_damping=jnp.asarray(stack_padded(pdamp)),
-        topology=topology,
-        stderr=stderr,
-        covariance=None if covariance is None else jnp.asarray(stack_covariances(covariance, stiff, vdamp, pdamp)),
-    )
-
-
 def training_scores(model: GlobalModel, recs, masses, topology) -> dict:
     """R² and NRMSE of the model force against the measured force, per recording and DOF."""
     out = {}
@@ -314,12 +284,7 @@ def reconstruct(
     else:
         blocks, covs, dof_stats, local = _paper(recs, masses, topology, wells, library, solver, select,
                                                 coordination, say, failure)
-    stderr = [np.sqrt(np.clip(np.diag(np.asarray(c)), 0.0, None)) for c in covs]
-    split = lambda v, b: (v[: len(b[0])], v[len(b[0]): len(b[0]) + len(b[1])], v[len(b[0]) + len(b[1]):])  # noqa: E731
-    se = [split(e, b) for e, b in zip(stderr, blocks)]
-    model = _model_from_blocks(masses, topology, *(list(x) for x in zip(*blocks)),
-                               {k: jnp.asarray(stack_padded([s[j] for s in se]))
-                                for j, k in enumerate((STIFFNESS, VELOCITY_DAMPING, POSITION_DAMPING))}, covs)
+    model = model_from(masses, topology, blocks, covs)
     say("training scores and checks")
     training = training_scores(model, recs, masses, topology)
     warnings += diagnose(recs, wells, model, training)
@@ -453,7 +418,7 @@ def gmc_sindy(
                                  local_stderr=np.full((1, library.n_terms), np.nan),
                                  thresholds=np.asarray(slv.threshold)[None], recordings_per_well=[],
                                  stats={"result": RESULTS[sol.result]}))
-    model = _model_from_blocks(masses, topology, stiff, vdamp, pdamp)
+    model = model_from(masses, topology, list(zip(stiff, vdamp, pdamp)))
     training = training_scores(model, recs, masses, topology)
     warnings += _sanity.check_fit_quality(training)
     warnings += _baseline_faults(model, recs)
