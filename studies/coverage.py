@@ -145,7 +145,8 @@ def run_case(label, factory, amplitude, snr, seed):
     t0 = time.time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        sol = g.reconstruct(recs, g.Library(r, dd), throw=False, **OPTIONS)
+        sol = g.reconstruct(recs, g.Library(r, dd), throw=False, **OPTIONS,
+                            designs=system.designs if OPTIONS.get("coordination", "evidence") == "evidence" else None)
     seconds = time.time() - t0
     rows = []
     for i in range(sol.value.n_dof):

@@ -138,7 +138,7 @@ def main():
     for seed in args.seeds:
         recs = g.systems.make_recordings(system, args.amp, snr_db=60.0, seed=seed)
         t0 = time.perf_counter()
-        gmr = g.reconstruct(recs, g.Library(5, 5)).value
+        gmr = g.reconstruct(recs, g.Library(5, 5), designs=system.designs).value
         t_fit = time.perf_counter() - t0
         models.append((f"GMR, seed {seed}", gmr, t_fit, recs))
         if args.refine:

@@ -73,7 +73,7 @@ def main():
             recs = g.systems.make_recordings(system, amp, snr_db=args.snr, seed=seed)
             if ratios is None:  # amplitude ratio per cell, folded and deployed (noise-free part dominates)
                 ratios = np.array([0.5 * np.ptp(r.x, axis=0) / L for r in recs])
-            res = g.reconstruct(recs, g.Library(5, 5))
+            res = g.reconstruct(recs, g.Library(5, 5), designs=system.designs)
             dofs = res.stats["dofs"]
             row = run_one(f"GMR {amp * 1e3:g} mm seed {seed}", res.value, system, truth, dist, f, A, settings)
             row["degree"] = [int(d.stats["degree"]) for d in dofs]

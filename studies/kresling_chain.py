@@ -50,7 +50,7 @@ TRANS_AMPLITUDE = 1e-4  # m, base displacement for the transmissibility
 
 def models_for(system, amplitude, seed):
     recs = g.systems.make_recordings(system, amplitude, snr_db=60.0, seed=seed)
-    gmr = g.reconstruct(recs, g.Library(*system.orders["gmr"]))
+    gmr = g.reconstruct(recs, g.Library(*system.orders["gmr"]), designs=system.designs)
     gmc = g.gmc_sindy(recs, g.Library(*system.orders["gmc"]))
     return recs, {"truth": system.truth, "GMR": gmr.value, "GMC-SINDy": gmc.value}, {"GMR": gmr, "GMC-SINDy": gmc}
 

@@ -90,7 +90,8 @@ def run(twist: str, amp: float, seed: int, fmax: float | None = None, coordinati
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = g.reconstruct(recs, g.Library(5, 5), coordination=coordination, throw=False)
+        res = g.reconstruct(recs, g.Library(5, 5), coordination=coordination, throw=False,
+                              designs=system.designs if coordination == "evidence" else None)
     t_fit = time.perf_counter() - t0
     lib = res.stats["library"]
     i2, i3 = lib.terms().index(("stiffness", 2)), lib.terms().index(("stiffness", 3))

@@ -181,7 +181,7 @@ def main():
 
     # (b) raw GMR model of the real Kresling truth
     t1 = time.time()
-    raw = g.reconstruct(g.systems.make_recordings(sysk, 3e-4), g.Library(5, 5)).value
+    raw = g.reconstruct(g.systems.make_recordings(sysk, 3e-4), g.Library(5, 5), designs=sysk.designs).value
     t_fit = time.time() - t1
     tr = sysk.truth
     # b0: the raw model on small vibrations (what the old part (b) refined on): already at the noise floor

@@ -119,8 +119,9 @@ def test_selection_kernels_jit_vmap_grad():
     bf = jnp.stack([jnp.asarray(X[k::3].T @ y[k::3]) for k in range(3)])
     yyf = jnp.asarray([y[k::3] @ y[k::3] for k in range(3)])
     masks = jnp.array([[True, False, False, False], [True, True, False, False]])
-    many = jax.vmap(cv_sse, in_axes=(None, None, None, 0))(Gf, bf, yyf, masks)
-    assert np.allclose(many, [cv_sse(Gf, bf, yyf, m) for m in masks])
+    zero = jnp.zeros((4, 4))
+    many = jax.vmap(cv_sse, in_axes=(None, None, None, 0, None))(Gf, bf, yyf, masks, zero)
+    assert np.allclose(many, [cv_sse(Gf, bf, yyf, m, zero) for m in masks])
     assert many[1] < 0.1 * many[0]
     # gradient of the RSS w.r.t. the target against finite differences
     g = jax.grad(lambda bb: rss(G, bb, yy, mask))(b)
@@ -383,3 +384,40 @@ def test_an_augmented_damping_that_feeds_energy_in_is_warned():
     assert len(msg) == 1 and "feeds energy in" in msg[0] and "keep the given model's damping" in msg[0]
     assert _not_passive(given, given, [rec]) == []
     assert _not_passive(aug, aug, [rec]) == []  # the given model's fault is the fit's to say
+
+
+def test_a_prior_holds_what_earlier_records_determined():
+    """With the posterior of earlier records as prior, a re-calibration column moves only as far as the
+    new rows' evidence outweighs it: a tight prior keeps its correction near 0 while a new term is still
+    found; an infinite variance (no prior) is plain least squares."""
+    from gmr_jax._discover._select import select_terms
+
+    rng = np.random.default_rng(3)
+    n = 4000
+    x = rng.standard_normal(n)
+    v = rng.standard_normal(n)
+    # the residual: a missing cubic damping plus a small apparent shift of the base column (noise of
+    # a collinear direction the earlier records fixed)
+    y = 0.3 * v**3 + 0.05 * x + 0.01 * rng.standard_normal(n)
+    Xb, Xc = x[:, None], np.stack([v**3, np.sign(v)], 1)
+    free = select_terms(Xb, Xc, y, SelectionRule(n_boot=50))
+    tight = select_terms(Xb, Xc, y, SelectionRule(n_boot=50), prior=np.array([[1e-10]]))
+    loose = select_terms(Xb, Xc, y, SelectionRule(n_boot=50), prior=np.array([[np.inf]]))
+    assert free.coef_base[0] == pytest.approx(0.05, abs=2e-3)
+    assert loose.coef_base[0] == pytest.approx(free.coef_base[0], rel=1e-9)
+    assert abs(tight.coef_base[0]) < 1e-3
+    for sel in (free, tight):
+        assert sel.kept == [0] and sel.coef_kept[0] == pytest.approx(0.3, rel=0.02)
+
+
+def test_a_switched_off_term_is_a_candidate_not_a_recalibration_column():
+    from gmr_jax._discover._catalogue import Term
+    from gmr_jax._discover._discover import absent
+
+    model = gmr_jax.from_terms([1.0], [TERMS[0], TERMS[1], {"dof": 0, "physics": "velocity_damping", "order": 3,
+                                                            "coefficient": 1e-14}])
+    t = np.arange(2000) * 0.01
+    rec = gmr_jax.Recording(t=t, x=np.sin(t)[:, None], v=np.cos(t)[:, None], a=-np.sin(t)[:, None],
+                            force=np.zeros((t.size, 1)), masses=[1.0])
+    assert absent(model, Term(0, "velocity_damping", 3), [rec])
+    assert not absent(model, Term(0, "velocity_damping", 1), [rec])

@@ -132,7 +132,7 @@ def test_cells_share_a_law_only_where_they_are_one_design(saddles, one_design):
     # same saddle ratio s/L: one design, scaled; otherwise each cell keeps its own law
     chain = _cubic_chain(saddles)
     recs = gmr.systems.make_recordings(chain, 3e-4, snr_db=40.0, seed=0)
-    sol = _fit(recs, settings=gmr.ReconstructSettings(damping_order=1))
+    sol = _fit(recs, settings=gmr.ReconstructSettings(damping_order=1), designs=[0, 0])
     for i in range(2):
         st = sol.stats["dofs"][i].stats
         assert st["design"] == [0, 1]
@@ -141,3 +141,14 @@ def test_cells_share_a_law_only_where_they_are_one_design(saddles, one_design):
         band = gmr.metrics.band_coverage(sol.value, chain.truth, i, (eq.min(), eq.max()), n=101, level=0.95)
         assert band.share >= 0.9
         assert gmr.metrics.restoring_error(sol.value, chain.truth, i, chain.x_range[i]) < 0.01
+
+
+def test_cells_share_a_law_only_when_labelled_one_design():
+    chain = _cubic_chain((0.012, 0.01))
+    recs = gmr.systems.make_recordings(chain, 3e-4, snr_db=40.0, seed=0)
+    sol = _fit(recs, settings=gmr.ReconstructSettings(damping_order=1))
+    assert all("design" not in d.stats for d in sol.stats["dofs"])
+    with pytest.raises(gmr.GMRInputError, match="one integer label per DOF"):
+        _fit(recs, designs=[0, 0, 0])
+    with pytest.raises(gmr.GMRInputError, match="evidence"):
+        gmr.reconstruct(recs, coordination="gls", designs=[0, 0])

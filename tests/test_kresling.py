@@ -241,6 +241,6 @@ def test_cells_of_one_design_reach_the_best_cells_accuracy(twist, amp, seed, tar
     recs = gmr_jax.systems.make_recordings(system, amp, snr_db=60, seed=seed)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = gmr_jax.reconstruct(recs)
+        res = gmr_jax.reconstruct(recs, designs=system.designs)
     errs = [gmr_jax.metrics.restoring_error(res.value, system.truth, c, system.x_range[c]) for c in range(5)]
     assert max(errs) < target, errs

@@ -102,7 +102,7 @@ def test_uncertainty_and_discovery_selection_have_no_lapack_batch():
     G = jnp.asarray(np.eye(5) * 3.0 + 0.1)
     Gf, bf, yyf = jnp.stack([G, G, G]), jnp.ones((3, 5)), jnp.ones(3)
     masks = jnp.array([[1, 1, 0, 0, 1], [1, 0, 1, 0, 1]], bool)
-    assert _found(_select._cv_many, Gf, bf, yyf, masks) == []
+    assert _found(_select._cv_many, Gf, bf, yyf, masks, jnp.zeros(Gf.shape[1:])) == []
     assert _found(_select._rss_boot, Gf, bf, yyf, jnp.stack([masks] * 3)) == []
     assert _found(_select._coef_boot, Gf, bf, masks[0]) == []
 

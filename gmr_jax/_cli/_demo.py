@@ -73,7 +73,7 @@ def run_case(system, amplitude, label, *, snr_db=60.0, seed=0, out: Path | None 
     r_gmr, d_gmr = system.orders["gmr"]
     r_gmc, d_gmc = system.orders["gmc"]
     t0 = time.perf_counter()
-    gmr, gmr_said = _quiet(reconstruct, recs, Library(r_gmr, d_gmr))
+    gmr, gmr_said = _quiet(lambda *a: reconstruct(*a, designs=system.designs), recs, Library(r_gmr, d_gmr))
     gmr_model, gmr_dofs = gmr.value, gmr.stats["dofs"]
     t_gmr = time.perf_counter() - t0
     t0 = time.perf_counter()

@@ -31,7 +31,7 @@ def register(sub):
                    "all data")
     f.add_argument("--coordination", choices=["evidence", "hermite", "gls"], default="evidence",
                    help="GMR's global step: evidence (default: one posterior of every well's records; the law, its "
-                   "degree, its band and whether cells of one design share a law, all from the evidence), hermite "
+                   "degree and its band from the evidence; cells labelled one design by --designs share a law), hermite "
                    "(the paper's route: local STLS fits, then their exact Hermite interpolant), gls (the paper's "
                    "route with a covariance-weighted least-squares coordination)")
     f.add_argument("--restoring-order", "-r", type=positive_int, default=5,
@@ -46,8 +46,8 @@ def register(sub):
                    "[...], \"elements\": [[a, b], ...]} (x: node displacements; every element's law from every "
                    "node's balance, on the evidence route; masses from the file unless --masses)")
     f.add_argument("--designs", default=None, metavar="L0,L1,...",
-                   help="graph only: one integer label per element; elements with one label share one law (their "
-                   "data pooled; default: every element its own law)")
+                   help="one integer label per DOF (per element of a graph); cells with one label are one design "
+                   "and share one law as far as their data agree (default: every cell its own law)")
     f.add_argument("--masses", default=None, help="comma-separated masses (default: from recordings, else 1)")
     f.add_argument("--no-velocity-damping", action="store_true",
                    help="leave out the terms sgn(v)|v|^j (friction, drag) from the library")
@@ -69,19 +69,17 @@ def graph_option(args, kwargs: dict):
     """`--topology`: a name, or a graph file (its masses and `--designs` go into `kwargs`)."""
     import gmr_jax as gmr
 
-    if args.topology in (None, "chain", "independent"):
-        if args.designs is not None:
-            raise GMRInputError("--designs labels the elements of a graph; give --topology GRAPH.json")
-        return args.topology
-    if not Path(args.topology).suffix.lower() == ".json":
-        raise GMRInputError(f"--topology must be chain, independent or a graph .json file, got {args.topology!r}")
-    graph, kwargs["graph_masses"] = gmr.load_graph(args.topology)
     if args.designs is not None:
         try:
             kwargs["designs"] = np.array([int(v) for v in args.designs.split(",")])
         except ValueError:
-            raise GMRInputError(f"--designs must be comma-separated integers, one per element, got "
-                                f"{args.designs!r}") from None
+            raise GMRInputError(f"--designs must be comma-separated integers, one per DOF (per element of a graph), "
+                                f"got {args.designs!r}") from None
+    if args.topology in (None, "chain", "independent"):
+        return args.topology
+    if not Path(args.topology).suffix.lower() == ".json":
+        raise GMRInputError(f"--topology must be chain, independent or a graph .json file, got {args.topology!r}")
+    graph, kwargs["graph_masses"] = gmr.load_graph(args.topology)
     return graph
 
 
@@ -124,6 +122,8 @@ def run(args) -> int:
             raise GMRInputError(f"--masses must be comma-separated numbers, got {args.masses!r}") from None
     fn = gmr.gmc_sindy if args.method == "gmc-sindy" else gmr.reconstruct
     topology = graph_option(args, kwargs)
+    if "designs" in kwargs and args.method != "gmr":
+        raise GMRInputError("--designs pools cells of one design on --method gmr; drop it for --method gmc-sindy")
     if isinstance(topology, gmr.Graph):
         if args.method != "gmr":
             raise GMRInputError("a graph is fitted by --method gmr (its elements' laws jointly, evidence route)")

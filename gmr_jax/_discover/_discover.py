@@ -29,7 +29,8 @@ import numpy as np
 from .._config import relieve_map_pressure
 from .._errors import GMRInputError
 from .._solution import RESULTS, Solution, code_name, message, raise_if_failed
-from .._model._model import GlobalModel, from_terms
+from .._fit._library import POSITION_DAMPING, VELOCITY_DAMPING
+from .._model._model import GlobalModel, coefficient_index, from_terms
 from .._recordings._derivatives import window_choice
 from .._recordings._recording import Recording, validate
 from .._simulate._free_run import SIM, sim_start
@@ -37,8 +38,8 @@ from .._simulate._inputs import sampled_spline, smooth_input
 from .._simulate._integrate import Integrator
 from .._simulate._offset import comparable, place
 from .._simulate._simulate import simulate
-from ._catalogue import PLAIN, Term, default_catalogue, model_terms
-from ._equation import dof_rows, sign_certain
+from ._catalogue import PLAIN, Term, basis, default_catalogue, model_terms
+from ._equation import dof_rows, model_force, sign_certain
 from ._identify import (MASS_RANGE, VIF_MAX, DofIdentifiability, ambiguous, closest, collinear_entry, determined,
                         explained, homogeneous, mass_believable, preload_entry, screen, separability_entry, vif)
 from ._locate import locate, where_sentence
@@ -220,6 +221,39 @@ def _short_runs(model, recs, sims, always: bool = False) -> dict:
             "crossings_model": model_runs}
 
 
+#: a model term whose force is below this share of the model's force on the records is absent (a term the
+#: reconstruction's evidence switched off, `_coordination._bayes.OFF`): a candidate, not a re-calibration column
+ABSENT = 1e-9
+
+
+def absent(model: GlobalModel, term: Term, recs) -> bool:
+    """Whether `term`'s force in `model` is below `ABSENT` x the RMS of the model's force on its DOF over `recs`."""
+    x = np.concatenate([r.x[:, term.dof] for r in recs])
+    v = np.concatenate([r.v[:, term.dof] for r in recs])
+    full = np.concatenate([model_force(model, r.x, r.v)[:, term.dof] for r in recs])
+    c = {(t["physics"], t["order"]): t["coefficient"] for t in model.terms() if t["dof"] == term.dof}
+    coef = c.get((term.family, term.order), 0.0) + (
+        c.get((POSITION_DAMPING, 0), 0.0) if (term.family, term.order) == (VELOCITY_DAMPING, 1) else 0.0)
+    part = coef * basis(term, x, v)
+    return bool(np.sqrt(np.mean(part**2)) < ABSENT * np.sqrt(np.mean(full**2)))
+
+
+def posterior_of(model: GlobalModel, dof: int, terms: list[Term]) -> np.ndarray | None:
+    """The covariance of the coefficients of `terms` (one DOF's basis functions) in the model's
+    `covariance` (a term's coefficient sums the model's entries of its basis function); None
+    when the model carries none."""
+    if model.covariance is None:
+        return None
+    index = coefficient_index(model)
+    A = np.zeros((len(terms), len(index)))
+    for r, t in enumerate(terms):
+        for c, (phys, order) in enumerate(index):
+            A[r, c] = float(Term(dof, phys, order) == t or (
+                t.family == VELOCITY_DAMPING and t.order == 1 and phys == POSITION_DAMPING and order == 0))
+    cov = A @ np.asarray(model.covariance, float)[dof] @ A.T
+    return cov if np.all(np.isfinite(cov)) else None
+
+
 def _augment(model: GlobalModel, corrections, new_terms, mass_corr) -> GlobalModel:
     terms = model.terms() + [dict(c) for c in corrections] + [dict(t) for t in new_terms]
     masses = np.asarray(model.masses) + mass_corr
@@ -239,6 +273,7 @@ def discover(
     decimate: int = 1,
     refit_masses: bool | None = None,
     error: str = "auto",
+    prior: bool = True,
     throw: bool = True,
 ) -> Solution:
     """Find the physics `model` left out, from `recordings`; show the fit on `holdout`.
@@ -269,6 +304,10 @@ def discover(
     - `error`: "auto" (output error when both models simulate, else equation error),
       "output" or "equation".
 
+    - `prior`: with a model that carries a covariance (a reconstructed model), its posterior is
+      the prior of the re-calibration: a term moves only as far as the new records' evidence
+      outweighs what the model's own records fixed (`_select.select_terms`). False: plain
+      least squares.
     - `throw`: raise `GMRComputationError` on a numerical failure (a non-finite fit).
 
     **Returns:** a `Solution` whose `value` is the `DiscoveryReport` (findings, corrections,
@@ -307,7 +346,7 @@ def discover(
     recs, placed = place(model, recs)
     unseen = [p["recording"] for p in placed]
     catalogue = default_catalogue(d) if catalogue is None else list(catalogue)
-    settings = {"form": form, "support": support, "decimate": int(decimate),
+    settings = {"form": form, "support": support, "decimate": int(decimate), "prior": bool(prior and model.covariance is not None),
                 "refit_masses": bool(refit_masses), "derivatives":
                 "recorded" if not estimated else "Savitzky-Golay (quintic, automatic window: the smaller of "
                 "0.3 period at the 99.5 % band edge of the power above the noise floor and the window whose cut-off "
@@ -326,7 +365,7 @@ def discover(
     new_terms, mass_corr = [], np.zeros(d)
     series = {"resid_before": [], "resid_after": [], "x": [], "v": [], "t": []}
     for i in range(d):
-        base = model_terms(model, i)
+        base = [t for t in model_terms(model, i) if not absent(model, t, recs)]
         cands = [t for t in catalogue if t.dof == i and t not in base
                  and not (t.family == "position_damping" and t.order == 0)
                  and not (unseen and t.family == "stiffness" and t.order == 0)]
@@ -353,13 +392,17 @@ def discover(
                 f"the mass is not separable from {with_} with these data (correlation {corr:.3f}): "
                 f"held at {m_i:.6g}")
 
+        cov_i = posterior_of(model, i, base) if prior else None
+
         def select(with_mass):
             B = np.concatenate([mcol[:, None], Xb], 1) if with_mass else Xb
             blabels = (["mass"] if with_mass else []) + labels
+            pri = None if cov_i is None else np.pad(cov_i, (1, 0), constant_values=np.inf)[1 - with_mass:,
+                                                                                         1 - with_mass:]
             keep, ns, vifs = screen(B, Xc, blabels, [t.label for t in cands], [t.physics for t in cands])
             screened, bad = keep, set()
             for it in range(len(screened) + 1):
-                sel = select_terms(B, Xc[:, keep], y, rule)
+                sel = select_terms(B, Xc[:, keep], y, rule, pri)
                 new = set()
                 # a kept term that another candidate reproduces: these data cannot name what it
                 # explains, and neither can a substitute (the next candidate would take its place

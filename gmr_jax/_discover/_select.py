@@ -92,9 +92,10 @@ def rss(G, b, yy, mask):
 
 
 @jax.jit
-def cv_sse(Gf, bf, yyf, mask):
-    """Blocked cross-validation SSE: fit on all folds but one (Gram sums), score on that one."""
-    G, b = Gf.sum(0), bf.sum(0)
+def cv_sse(Gf, bf, yyf, mask, prior):
+    """Blocked cross-validation SSE: fit on all folds but one (Gram sums plus the `prior`
+    precision), score on that one."""
+    G, b = Gf.sum(0) + prior, bf.sum(0)
 
     def one(Gk, bk, yyk):
         c = _masked_solve(G - Gk, b - bk, mask)
@@ -109,7 +110,7 @@ def coefficients(G, b, mask):
 
 
 _rss_many = jax.jit(jax.vmap(rss, in_axes=(None, None, None, 0)))
-_cv_many = jax.jit(jax.vmap(cv_sse, in_axes=(None, None, None, 0)))
+_cv_many = jax.jit(jax.vmap(cv_sse, in_axes=(None, None, None, 0, None)))
 # replicates x masks
 _rss_boot = jax.jit(jax.vmap(jax.vmap(rss, in_axes=(None, None, None, 0)), in_axes=(0, 0, 0, 0)))
 _coef_boot = jax.jit(jax.vmap(coefficients, in_axes=(0, 0, None)))
@@ -174,12 +175,31 @@ def _f_pvalue(rss0, rss1, n_eff, p1):
     return float(f_dist.sf(F, 1, d2))
 
 
+#: a prior's precision is capped at this multiple of the information one unit-norm column of rows carries
+PRIOR_CAP = 1e6
+
+
+def prior_precision(cov: np.ndarray, scale: np.ndarray, noise: float) -> np.ndarray:
+    """The precision `noise` C^-1 of corrections whose prior covariance is `cov`, for columns
+    divided by `scale`, in the units of a residual sum of squares (so that RSS + d' P d is the
+    negative log posterior times 2 `noise`); eigenvalues capped at `PRIOR_CAP`."""
+    C = scale[:, None] * np.asarray(cov, float) * scale[None, :]
+    lam, V = np.linalg.eigh(0.5 * (C + C.T))
+    inv = np.minimum(noise / np.maximum(lam, 1e-300), PRIOR_CAP)
+    return (V * inv[None, :]) @ V.T
+
+
 def select_terms(X_base: np.ndarray, X_cand: np.ndarray, y: np.ndarray,
-                 rule: SelectionRule = SelectionRule()) -> Selection:
+                 rule: SelectionRule = SelectionRule(), prior: np.ndarray | None = None) -> Selection:
     """Run the selection rule (module docstring) for one DOF.
 
     **Arguments:** `X_base` (n, p0) re-calibration columns, `X_cand` (n, q) candidates, `y` (n,)
-    the given model's residual (rows concatenated over recordings, in time order)."""
+    the given model's residual (rows concatenated over recordings, in time order). `prior`:
+    optional (p0, p0) covariance of the re-calibration corrections (a column with no prior:
+    infinite variance on the diagonal); the corrections then minimise
+    RSS + s^2 tau d' prior^-1 d, s^2 the residual variance and tau the integrated
+    autocorrelation time of the re-calibrated fit (n / tau independent rows), and every fit,
+    test and bootstrap replicate below carries that penalty."""
     p0, q = X_base.shape[1], X_cand.shape[1]
     Z = np.concatenate([X_base, X_cand], 1)
     scale = np.linalg.norm(Z, axis=0)
@@ -191,15 +211,26 @@ def select_terms(X_base: np.ndarray, X_cand: np.ndarray, y: np.ndarray,
     P = p0 + q
     base = np.zeros(P, bool)
     base[:p0] = True
+    Pr = np.zeros((P, P))
 
     def resid_of(mask):
         c = np.asarray(coefficients(G, b, jnp.asarray(mask)))
         return y - Z @ c
 
+    if prior is not None and p0:
+        r0 = resid_of(base)
+        noise = float(r0 @ r0) / max(n - p0, 1) * integrated_time(r0)
+        free = ~np.isfinite(np.diag(prior))
+        cov = np.where(free[:, None] | free[None, :], 0.0, prior)
+        Pr[:p0, :p0] = prior_precision(cov, scale[:p0], noise)
+        Pr[np.where(free)[0], :] = Pr[:, np.where(free)[0]] = 0.0
+        G = G + jnp.asarray(Pr)
+    Pj = jnp.asarray(Pr)
+
     alpha_b = rule.alpha / max(q, 1)
     S = base.copy()
     steps = []
-    cv_S = float(cv_sse(Gf, bf, yyf, jnp.asarray(S)))
+    cv_S = float(cv_sse(Gf, bf, yyf, jnp.asarray(S), Pj))
     rss_S = float(rss(G, b, yy, jnp.asarray(S)))
     tau = integrated_time(resid_of(S))
     for _ in range(min(rule.max_new, q)):
@@ -208,7 +239,7 @@ def select_terms(X_base: np.ndarray, X_cand: np.ndarray, y: np.ndarray,
             break
         masks = np.repeat(S[None], len(cand), 0)
         masks[np.arange(len(cand)), cand] = True
-        cvs = np.asarray(_cv_many(Gf, bf, yyf, jnp.asarray(masks)))
+        cvs = np.asarray(_cv_many(Gf, bf, yyf, jnp.asarray(masks), Pj))
         k = int(np.argmin(cvs))
         j = cand[k]
         rss_j = float(rss(G, b, yy, jnp.asarray(masks[k])))
@@ -231,7 +262,7 @@ def select_terms(X_base: np.ndarray, X_cand: np.ndarray, y: np.ndarray,
     gg = np.concatenate([np.zeros((1, P, P)), np.cumsum(Z[:, :, None] * Z[:, None, :], 0)])
     gy = np.concatenate([np.zeros((1, P)), np.cumsum(Z * y[:, None], 0)])
     y2 = np.concatenate([[0.0], np.cumsum(y * y)])
-    GB = jnp.asarray((gg[starts + block] - gg[starts]).sum(1))
+    GB = jnp.asarray((gg[starts + block] - gg[starts]).sum(1) + Pr[None])
     bB = jnp.asarray((gy[starts + block] - gy[starts]).sum(1))
     yyB = jnp.asarray((y2[starts + block] - y2[starts]).sum(1))
     del gg, gy

@@ -16,6 +16,7 @@ import numpy as np
 
 from .._coordination import _bayes
 from .._custom_types import Array, Bool, Float, Int
+from .._errors import GMRInputError
 from .._fit._library import POSITION_DAMPING, STIFFNESS, VELOCITY_DAMPING
 from .._model._model import GlobalModel
 from .._recordings._derivatives import band_edge
@@ -157,9 +158,9 @@ def _design(stats, geometry, wells, slope, hyper, basis):
     return _bayes.design_posterior(stats, maps, damping_sd, last.log_noise, basis, throw=False)
 
 
-def estimate(recs, masses, topology, settings: ReconstructSettings, wells, say, failure):
-    """Stages 3-5 for every DOF of completed recordings. Returns the model's blocks, per-DOF
-    covariances and per-DOF stats."""
+def estimate(recs, masses, topology, settings: ReconstructSettings, wells, say, failure, design_labels=None):
+    """Stages 3-5 for every DOF of completed recordings (DOFs with one of `design_labels` share a
+    law). Returns the model's blocks, per-DOF covariances and per-DOF stats."""
     d = recs[0].n_dof
     k, dd = settings.degree, settings.damping_order
     fits, stats = [], []
@@ -189,7 +190,7 @@ def estimate(recs, masses, topology, settings: ReconstructSettings, wells, say, 
             "resolution": (np.abs(np.asarray(post.mean)) / np.maximum(sd, 1e-300)).tolist(),
         })
     maps = [np.asarray(_bayes.to_monomials(_basis(settings, len(wells[i][2])), *fits[i][0])) for i in range(d)]
-    for members in designs(recs, wells):
+    for members in designs(design_labels, wells):
         say(f"DOFs {', '.join(map(str, members))}: one design")
         eq = np.stack([equilibria(recs, i, wells[i][2])[[0, -1]] for i in members])
         slope = np.array([np.polynomial.polynomial.polyval(eq[j, 0], np.polynomial.polynomial.polyder(
@@ -214,14 +215,24 @@ def estimate(recs, masses, topology, settings: ReconstructSettings, wells, say, 
     return blocks, covs, stats
 
 
-def designs(recs, wells) -> list[list[int]]:
-    """The DOFs that may share one design: those with the same number (two or more) of wells,
-    in groups of two or more. How far each member follows the shared law is the evidence's."""
+def designs(labels, wells) -> list[list[int]]:
+    """The groups of DOFs that share one design: DOFs with one label in `labels` (one per DOF;
+    None: none), in groups of two or more. How far each member follows the shared law is the
+    evidence's. Members must have the same number (two or more) of wells."""
+    if labels is None:
+        return []
     by = {}
-    for i, (_, _, groups) in enumerate(wells):
-        if len(groups) >= 2:
-            by.setdefault(len(groups), []).append(i)
-    return [m for m in by.values() if len(m) >= 2]
+    for i, lab in enumerate(labels):
+        by.setdefault(int(lab), []).append(i)
+    out = [m for m in by.values() if len(m) >= 2]
+    for m in out:
+        counts = {i: len(wells[i][2]) for i in m}
+        if len(set(counts.values())) != 1 or min(counts.values()) < 2:
+            raise GMRInputError(
+                f"designs: DOFs {', '.join(map(str, m))} are labelled one design but have "
+                f"{', '.join(f'{n} well(s)' for n in counts.values())} in the recordings; a design's members need the same "
+                f"number (two or more) of wells: give them different labels")
+    return out
 
 
 def stack_padded(rows) -> np.ndarray:

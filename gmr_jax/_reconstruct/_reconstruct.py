@@ -240,8 +240,8 @@ def reconstruct(
 
     by one of two routes. "evidence" (default): every well's records in weak form (no
     differentiated signal) under one Gaussian prior on the global law, its scales, the restoring
-    degree and the wells' noise by the evidence; cells with the same number of wells share a law
-    as far as their data agree (`ReconstructSettings`, `reconstruct_arrays`). "hermite", "gls":
+    degree and the wells' noise by the evidence; cells labelled one design share a law as far
+    as their data agree (`ReconstructSettings`, `reconstruct_arrays`). "hermite", "gls":
     the paper's route, an STLS fit of the local library at each well (Eqs. 5-10), coordinated by
     the exact Hermite interpolant (Eq. 18) or its covariance-weighted least-squares form.
 
@@ -253,8 +253,9 @@ def reconstruct(
       `solver.threshold` as given); `library.damping_order` is the evidence route's damping order
       unless `settings` is given.
     - `topology`: "chain" (default for several DOFs), "independent", or a `Graph` (evidence only;
-      x: node displacements). `masses`: per DOF (default: the recordings'). `designs`: on a
-      `Graph`, one label per element; elements with one label share one law.
+      x: node displacements). `masses`: per DOF (default: the recordings'). `designs`: one label per
+      DOF (per element on a `Graph`); those with one label are one design and share one law, as
+      far as their data agree on a chain or independent DOFs (default: each its own law).
     - `coordination`: "evidence", "hermite" or "gls".
     - `settings`: a `ReconstructSettings` (degree, damping order, well grouping, window).
     - `throw`: raise `GMRComputationError` on a numerical failure (else read `result`).
@@ -278,8 +279,12 @@ def reconstruct(
     recs, masses, topology, warnings = _resolve(recordings, masses, topology)
     d = recs[0].n_dof
     wells = [_wells(recs, i, settings.well_tol) for i in range(d)]
+    if designs is not None and coordination != "evidence":
+        raise GMRInputError(f"designs: cells share a law on the 'evidence' route only (the paper's route fits each "
+                            f"DOF on its own), got coordination={coordination!r}; drop designs or use the default route")
     if coordination == "evidence":
-        blocks, covs, dof_stats = estimate(recs, masses, topology, settings, wells, say, failure)
+        blocks, covs, dof_stats = estimate(recs, masses, topology, settings, wells, say, failure,
+                                           _labels(designs, d))
         local = [None] * d
     else:
         blocks, covs, dof_stats, local = _paper(recs, masses, topology, wells, library, solver, select,
@@ -339,6 +344,17 @@ def _paper(recs, masses, topology, wells, library, solver, select, method, say, 
 def _stack(trees):
     """The trees stacked leaf by leaf (one compiled program, not one eager stack per leaf)."""
     return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *trees)
+
+
+def _labels(designs, d: int):
+    """`designs` as one integer label per DOF, or None."""
+    if designs is None:
+        return None
+    lab = np.asarray(designs)
+    if lab.shape != (d,) or not np.issubdtype(lab.dtype, np.integer):
+        raise GMRInputError(f"designs must be one integer label per DOF ({d} of them), got {lab.tolist()!r}; "
+                            f"DOFs with one label share one law, e.g. designs=[0] * {d} for cells of one design")
+    return lab
 
 
 def _graph(recordings, graph, designs, coordination, settings, masses, throw, progress) -> Solution:

@@ -414,6 +414,7 @@ def _chain_system(name: str, chain: KreslingChain, twist: str, sweep, amplitude:
         description=f"{L.shape[0]}-cell Kresling-inspired bistable truss chain ({twist} twist), base "
         f"excited (nominal amplitude {amplitude * 1e3:g} mm)",
         units=("x [m]", "x' [m/s]", "F [N]"),
+        designs=np.zeros(L.shape[0], int),
     )
 
 

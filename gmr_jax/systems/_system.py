@@ -24,9 +24,10 @@ class System:
     and damping errors are measured (per DOF for chains); `orders`: library orders
     {"gmr": (r, d), "gmc": (r, d)} used by the paper for this case.
 
+    `designs`: one label per DOF (per element on a `Graph`), the same label for cells of one
+    design (`reconstruct(..., designs=system.designs)`); None where every cell is its own.
     Systems on a `Graph` (lattices): `equilibria` are node displacements, `x_range`, `v_range`
-    are per element (deformation and its rate), `designs` (E,) labels the elements of one design,
-    and `drive="force"`: `make_recordings` drives every node with its own multisine force in the
+    are per element (deformation and its rate), and `drive="force"`: `make_recordings` drives every node with its own multisine force in the
     band `sweep`, not the base."""
 
     name: str
