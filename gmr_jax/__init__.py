@@ -92,7 +92,7 @@ from ._simulate._simulate import simulate as simulate
 
 # basins of deployment (Fig. 11)
 from ._basins._sweep import BasinMap as BasinMap, SweepSettings as SweepSettings, basin_map as basin_map
-from ._basins._wells import stable_wells as stable_wells
+from ._basins._wells import configuration as configuration, stable_wells as stable_wells
 from ._basins._probability import BasinProbability as BasinProbability, basin_probability as basin_probability
 
 # refinement on trajectories

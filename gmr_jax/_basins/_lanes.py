@@ -101,17 +101,25 @@ def _pulse(t, f, amp, t_off):
     return jnp.where(t <= t_off, amp * _half_period_sin(2 * jnp.pi * f * t), 0.0)
 
 
+def load_node(load: str, d: int) -> int | None:
+    """The mass (node) a half-sine force acts on: "tip" the last, "node:K" mass K; None for "base"."""
+    if load == "base":
+        return None
+    return d - 1 if load == "tip" else int(load.split(":")[1])
+
+
 def half_sine_field(load: str, d: int):
     """`field(t, y, args)` of the Eq. (25) half-sine for one point: y = (x, v) (dof,), args =
     (model, f, amp, t_off)."""
+    node = load_node(load, d)
 
     def field(t, y, args):
         model, f, amp, t_off = args
         x, v = y
         pulse = _pulse(t, f, amp, t_off)
         zero = jnp.zeros_like(pulse)
-        if load == "tip":
-            acc = model.accelerations(x, v, zero, jnp.concatenate([jnp.zeros(d - 1, x.dtype), pulse[None]]))
+        if node is not None:
+            acc = model.accelerations(x, v, zero, jnp.zeros(d, x.dtype).at[node].set(pulse))
         else:
             acc = model.accelerations(x, v, pulse, jnp.zeros(d, x.dtype))
         return v, acc
@@ -142,8 +150,11 @@ def lanes_field(model, load: str, d: int, per_lane: bool):
     eye = np.eye(d)
     carry = jnp.asarray(np.eye(d, k=1) - eye)
     relative = jnp.asarray(eye - np.eye(d, k=-1))
-    tip_row = jnp.asarray(np.eye(d)[:, -1:])  # (dof, 1): the load on the last mass
+    node = load_node(load, d)
+    tip_row = jnp.asarray(np.eye(d)[:, (d - 1 if node is None else node):][:, :1])  # (dof, 1): the loaded mass
     base_row = jnp.asarray(np.eye(d)[:, :1]) if chain else jnp.ones((d, 1))
+    loaded = d - 1 if node is None else node
+    load_rel = relative @ tip_row  # S e_K: the loaded mass's acceleration in the relative coordinates
 
     def horner(coef, z):
         """sum_k coef[:, k] z^k, highest power first (one multiply-add per order)."""
@@ -164,7 +175,7 @@ def lanes_field(model, load: str, d: int, per_lane: bool):
             s = jnp.sign(v) if m.sign_eps == 0.0 else jnp.tanh(v / m.sign_eps)
             force = force + s * horner(B, jnp.abs(v))
         pulse = _pulse(t, f, amp, t_off)
-        tip, base = (pulse, 0.0) if load == "tip" else (0.0, pulse)
+        tip, base = (pulse, 0.0) if node is not None else (0.0, pulse)
         precision = jax.lax.Precision.HIGHEST
         if chain and per_lane:
             # m_i a_i = force_i - F_i + F_{i+1}; x_i'' = a_i - a_{i-1} (a_{-1}: the base); a is two
@@ -175,7 +186,7 @@ def lanes_field(model, load: str, d: int, per_lane: bool):
             # the same with the masses shared by the lanes: one matrix S diag(1/m) D (S e_last = e_last)
             inv = 1.0 / m.masses
             acc = (jnp.matmul(relative.astype(dtype) @ (inv[:, None] * carry.astype(dtype)), force, precision=precision)
-                   + tip_row.astype(dtype) * (inv[-1] * tip) - base_row.astype(dtype) * base)
+                   + load_rel.astype(dtype) * (inv[loaded] * tip) - base_row.astype(dtype) * base)
         else:
             acc = (tip_row.astype(dtype) * tip - force) / masses - base_row.astype(dtype) * base
         return v, acc

@@ -83,7 +83,8 @@ def supports(model, settings) -> bool:
     """Whether the native kernel integrates this model under these settings (float64, a
     `GlobalModel` on a chain or independent DOFs; the explicit pairs Tsit5, Dopri5, Dopri8)."""
     return (isinstance(model, GlobalModel) and isinstance(model.topology, (Chain, Independent))
-            and settings.precision == "float64" and solver_name(settings.solver) is not None)
+            and settings.precision == "float64" and solver_name(settings.solver) is not None
+            and settings.load in ("tip", "base"))
 
 
 def _structure(model) -> dict:

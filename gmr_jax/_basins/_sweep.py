@@ -18,6 +18,7 @@ from jaxtyping import Array, ArrayLike, Float, Int
 from .._config import relieve_map_pressure
 from .._errors import GMRInputError, check_real, describe, is_tracer
 from .._model._model import AbstractMechanicalModel
+from .._topology import Graph
 from .._simulate._inputs import half_sine
 from .._simulate._integrate import Integrator, integrate, vector_field
 from .._simulate._simulate import has_coulomb
@@ -27,6 +28,11 @@ from ._joint import joint_final_states
 from ._lanes import SOLVERS as LANE_SOLVERS, as_solver, lanes_final_states
 
 LOADS = ("tip", "base")
+
+
+def _is_node(load: str) -> bool:
+    head, _, k = load.partition(":")
+    return head == "node" and k.isdigit()
 BATCHINGS = ("auto", "native", "lanes", "joint", "member")
 SOLVERS = tuple(LANE_SOLVERS)
 PRECISIONS = {"float64": jnp.float64, "float32": jnp.float32}
@@ -43,8 +49,9 @@ class SweepSettings(eqx.Module):
     - `v_tol`: ... and |v| < v_tol · span · (1 s⁻¹).
     - `box_spans`: divergence box: a point whose x leaves centre ± box_spans · span (centre and
       span of each cell's wells) is stopped there and flagged `diverged`.
-    - `load`: "tip" (default, Eq. 25: force A sin(2πft) on the last mass for t <= 1/(2f)) or
-      "base" (the same half-sine as base acceleration, A in m/s²).
+    - `load`: "tip" (default, Eq. 25: force A sin(2πft) on the last mass for t <= 1/(2f)),
+      "node:K" (the same force on mass K, counted from 0: a node of a `Graph`; "lanes" batching)
+      or "base" (the same half-sine as base acceleration, A in m/s²).
     - `batching`: "lanes" (default; "auto" is the same): diffrax's `solver.step` and
       `PIDController` on `chunk` lanes at once inside one loop (`_lanes`), each point with its
       own time, step size, controller state and accept/reject decision, and a lane whose point
@@ -95,8 +102,9 @@ class SweepSettings(eqx.Module):
 
     def __check_init__(self):
         # plain Python on concrete values; tracers (settings built inside jit) are not inspected
-        if not isinstance(self.load, str) or self.load not in LOADS:
-            raise GMRInputError(f"SweepSettings.load must be one of {LOADS}, got {describe(self.load)}")
+        if not isinstance(self.load, str) or not (self.load in LOADS or _is_node(self.load)):
+            raise GMRInputError(f"SweepSettings.load must be one of {LOADS} or 'node:K' (a force on mass K, from 0), "
+                                f"got {describe(self.load)}")
         if not isinstance(self.batching, str) or self.batching not in BATCHINGS:
             raise GMRInputError(f"SweepSettings.batching must be one of {BATCHINGS}, got {describe(self.batching)}")
         if self.precision not in PRECISIONS:
@@ -131,7 +139,8 @@ class SweepSettings(eqx.Module):
 
 
 class BasinMap(eqx.Module):
-    """`wells` (NA, NF, dof): index of the well each cell ended in (ordered by deformation),
+    """`wells` (NA, NF, cells): index of the well each cell (each element of a `Graph`) ended in
+    (ordered by deformation),
     -1 when not settled or failed; `config` (NA, NF): for bistable cells, bit i set = cell i in
     its second well; with K well slots per cell (a tri-stable DOF: K = 3), the sum of cell i's
     well index times K^i (`plots.config_label(config, dof, K)` writes it); -1 as above; `result` (NA, NF) RESULTS codes; `x_final`, `v_final` (NA, NF, dof);
@@ -146,6 +155,11 @@ class BasinMap(eqx.Module):
     x_final: Float[Array, "na nf dof"]
     v_final: Float[Array, "na nf dof"]
     steps: Int[Array, "na nf"]
+
+    def counts(self) -> Int[Array, "na nf"]:
+        """Per point, the number of cells outside their first well (-1 where not settled): the
+        class of a configuration of many elements (its pattern is `wells`)."""
+        return jnp.where(jnp.all(self.wells >= 0, axis=-1), jnp.sum(self.wells > 0, axis=-1), -1)
 
     def miss(self, wells: Float[ArrayLike, "dof max_wells"], target) -> Float[Array, "na nf"]:
         """How far each point ended from the `target` configuration, a smooth quantity of the
@@ -178,13 +192,17 @@ def _final_state(model, settings: SweepSettings, x0, f, a, centre, span):
     return _member_final_state(model, settings, x0, f, a, centre, span)[:3]
 
 
-def classify(x1, v1, code, wells, span, settings: SweepSettings):
+def classify(x1, v1, code, wells, span, settings: SweepSettings, couplers: bool = False):
     """Well index per cell (-1: not settled, failed, diverged) and the configuration code (sum of
-    well index i times K^i over cells i, K = wells.shape[1]: the bit field for bistable cells)."""
+    well index i times K^i over cells i, K = wells.shape[1]: the bit field for bistable cells).
+    `couplers`: cells with one well (the couplers of a `Graph`, stressed by the others) are not
+    judged by their position, only by their rate."""
     dist = jnp.abs(x1[:, None] - wells)  # (dof, max_wells)
     dist = jnp.where(jnp.isnan(wells), jnp.inf, dist)
     k = jnp.argmin(dist, axis=1)
     near = jnp.min(dist, axis=1) < settings.x_tol * span
+    if couplers:
+        near = near | (jnp.sum(~jnp.isnan(wells), axis=1) < 2)
     slow = jnp.abs(v1) < settings.v_tol * span
     settled = near & slow & jnp.isfinite(x1)
     good = code == RESULTS.successful._value
@@ -221,18 +239,33 @@ def _chunk(model, settings, x0, wells, fs, amps):
     return idx, config, code, x1, v1, steps
 
 
+def _box(topology, centre, span, box_spans, d: int):
+    """The divergence box (lo, hi) of the coordinates from the wells' (M, classes) centre and span:
+    each cell's centre +- box_spans spans; on a `Graph` every node within the sum over elements of
+    |centre| + box_spans span (a node's displacement sums element deformations along a path)."""
+    if not isinstance(topology, Graph):
+        return centre - box_spans * span, centre + box_spans * span
+    reach = jnp.sum(jnp.abs(centre) + box_spans * span, axis=-1, keepdims=True)
+    reach = jnp.broadcast_to(reach, reach.shape[:-1] + (d,))
+    return -reach, reach
+
+
 def _lanes(models, settings, x0s, wells, fs, amps, mids, lanes: int, ensemble: bool):
     """Every point of this call through `lanes` lanes with per-point step control (`_lanes`);
-    `wells`, `x0s` (M, ...) per model, point k of model `mids[k]` when `ensemble`."""
-    span, centre = _geometry(wells)  # (M, dof)
-    lo, hi = centre - settings.box_spans * span, centre + settings.box_spans * span
+    `wells`, `x0s` (M, ...) per model, point k of model `mids[k]` when `ensemble`. On a `Graph`
+    the points are classified by their elements' deformations."""
+    span, centre = _geometry(wells)  # (M, classes)
+    topology = models.topology
+    lo, hi = _box(topology, centre, span, settings.box_spans, x0s.shape[-1])
     x1, v1, code, steps = lanes_final_states(models, settings, as_solver(settings.solver), x0s, fs, amps,
                                              mids if ensemble else None, lo, hi, lanes, settings.attempts_per_pass)
+    graph = isinstance(topology, Graph)
+    cx, cv = (topology.deformations(x1), topology.deformations(v1)) if graph else (x1, v1)
     if ensemble:
-        idx, config, code = jax.vmap(lambda x, v, c, m: classify(x, v, c, wells[m], span[m], settings))(
-            x1, v1, code, mids)
+        idx, config, code = jax.vmap(lambda x, v, c, m: classify(x, v, c, wells[m], span[m], settings, graph))(
+            cx, cv, code, mids)
     else:
-        idx, config, code = _classify_all(x1, v1, code, wells[0], span[0], settings)
+        idx, config, code = _classify_all(cx, cv, code, wells[0], span[0], settings, graph)
     return idx, config, code, x1, v1, steps
 
 
@@ -284,13 +317,18 @@ def friction_smoothing(model, settings: SweepSettings, wells) -> tuple:
 def resolve_batching(model, settings: SweepSettings, devices) -> str:
     """The batching a sweep runs with ("auto" is "lanes"); "native" asked for where it cannot run
     is a `GMRInputError` naming why and the fix."""
+    graph = isinstance(model.topology, Graph)
+    if settings.batching in ("joint", "member") and (graph or _is_node(settings.load)):
+        raise GMRInputError(f"batching={settings.batching!r} sweeps chains and independent DOFs under a tip or base load; "
+                            f"a {'Graph' if graph else 'node:K load'} sweeps on batching='lanes' (the default)")
     if settings.batching != "native":
         return "lanes" if settings.batching == "auto" else settings.batching
     why = None
     if not _native.supports(model, settings):
         why = (f"the native kernel integrates a GlobalModel on a chain or independent DOFs in float64 with "
-               f"Tsit5, Dopri5 or Dopri8 (got {type(model).__name__}, precision {settings.precision}, solver "
-               f"{type(as_solver(settings.solver)).__name__})")
+               f"Tsit5, Dopri5 or Dopri8 under a tip or base load (got {type(model).__name__} on "
+               f"{type(model.topology).__name__}, precision {settings.precision}, solver "
+               f"{type(as_solver(settings.solver)).__name__}, load {settings.load!r})")
     elif _native.compiler() is None:
         why = "GMR_NATIVE turns it off" if _native.disabled() else "no C compiler was found ($CC, cc, gcc, clang)"
     elif jax.process_count() > 1:
@@ -340,7 +378,7 @@ def _check_inputs(model, f, A, wells, x0):
     if not isinstance(model, AbstractMechanicalModel):
         raise GMRInputError(f"basin_map needs a mechanical model (GlobalModel, KreslingChain, ...), got "
                             f"{type(model).__name__}; load a model file with gmr_jax.load_model")
-    d = model.n_dof
+    d, e = model.n_dof, model.n_elements
     f, A = np.asarray(f, float), np.asarray(A, float)
     for name, v in (("f", f), ("A", A)):
         if v.ndim != 1 or v.size == 0:
@@ -350,9 +388,13 @@ def _check_inputs(model, f, A, wells, x0):
     if np.any(f <= 0):
         raise GMRInputError("f must be > 0 (Hz): the half-sine lasts 1/(2f)")
     wells = np.asarray(wells, float)
-    if wells.ndim != 2 or wells.shape[0] != d:
-        raise GMRInputError(f"wells must be (dof, max_wells) = ({d}, k) for this {d}-DOF model, got shape "
+    what = "elements" if isinstance(model.topology, Graph) else "dof"
+    if wells.ndim != 2 or wells.shape[0] != e:
+        raise GMRInputError(f"wells must be ({what}, max_wells) = ({e}, k) for this model, got shape "
                             f"{wells.shape}; compute them with gmr_jax.stable_wells(model, x_range)")
+    if isinstance(model.topology, Graph) and x0 is None:
+        raise GMRInputError("a Graph's sweep needs x0, the node displacements it starts from (a stable "
+                            "configuration: gmr_jax.configuration(model, wells, pattern))")
     if np.any(np.all(np.isnan(wells), axis=1)):
         bad = np.nonzero(np.all(np.isnan(wells), axis=1))[0].tolist()
         raise GMRInputError(f"no stable well for DOF(s) {bad}: widen the x_range given to stable_wells")
@@ -361,6 +403,11 @@ def _check_inputs(model, f, A, wells, x0):
         if x0.shape != (d,) or not np.all(np.isfinite(x0)):
             raise GMRInputError(f"x0 must be {d} finite deformations (one per DOF), got {x0.tolist()}")
     return f, A, wells, x0
+
+
+def _check_load(settings: SweepSettings, d: int):
+    if _is_node(settings.load) and int(settings.load.split(":")[1]) >= d:
+        raise GMRInputError(f"SweepSettings.load={settings.load!r}: this model has {d} masses (nodes 0..{d - 1})")
 
 
 def basin_map(
@@ -383,8 +430,11 @@ def basin_map(
     - `model`: any mechanical model (reconstructed, hand-written or a truth system).
     - `f`, `A`: actuation frequencies (Hz) and amplitudes (force units; m/s² for
       `settings.load="base"`) of the grid.
-    - `wells`: (dof, max_wells) stable equilibria per cell (`stable_wells`), ordered.
-    - `x0`: start (default: every cell in its first well, at rest).
+    - `wells`: (dof, max_wells) stable equilibria per cell (`stable_wells`), ordered; on a `Graph`
+      (elements, max_wells), each element's wells: final states are classified by the elements'
+      deformations (`BasinMap.wells` per element, `config` the elements' well indices as digits).
+    - `x0`: start (default: every cell in its first well, at rest; on a `Graph`, required: the
+      node displacements of a stable configuration, `configuration`).
     - `settings`: `SweepSettings` (tolerances, settling, classification, load, batching).
     - `chunk`: (not for "native", which runs 16 points per group on every core) under "lanes"
       batching the number of lanes per device (default 128 on a CPU,
@@ -430,6 +480,7 @@ def basin_map(
         return _traced_map(model, f, A, wells, x0, settings, chunk, throw)
     relieve_map_pressure()  # a long session's compiled programs (`_config.map_pressure`)
     f_np, a_np, wells_np, x0_np = _check_inputs(model, f, A, wells, x0)
+    _check_load(settings, model.n_dof)
     model, sign_eps = friction_smoothing(model, settings, wells_np)
     n_threads = None if devices is None else len(devices)  # native: one thread per device given, else every core
     devices = tuple(jax.devices() if devices is None else devices)
@@ -478,9 +529,12 @@ def _traced_map(model, f, A, wells, x0, settings: SweepSettings, chunk, throw: b
                             f"{type(model).__name__}")
     wells_np = np.asarray(wells, float)
     d = model.n_dof
-    if wells_np.ndim != 2 or wells_np.shape[0] != d:
-        raise GMRInputError(f"wells must be (dof, max_wells) = ({d}, k) for this {d}-DOF model, got shape "
-                            f"{wells_np.shape}")
+    if wells_np.ndim != 2 or wells_np.shape[0] != model.n_elements:
+        raise GMRInputError(f"wells must be (cells, max_wells) = ({model.n_elements}, k) for this model (the "
+                            f"elements of a Graph), got shape {wells_np.shape}")
+    if x0 is None and isinstance(model.topology, Graph):
+        raise GMRInputError("a Graph's sweep needs x0, the node displacements it starts from")
+    _check_load(settings, d)
     if jnp.ndim(f) != 1 or jnp.ndim(A) != 1:
         raise GMRInputError(f"f and A must be 1-D arrays of grid values, got shapes {jnp.shape(f)}, {jnp.shape(A)}")
     settings = dataclasses.replace(settings, batching="lanes")
@@ -527,7 +581,7 @@ def _traced_map(model, f, A, wells, x0, settings: SweepSettings, chunk, throw: b
 
     idx, config, code, x1, v1, steps = sweep(fs, amps)
     na, nf = A.shape[0], f.shape[0]
-    bm = BasinMap(f=f, A=A, wells=idx.reshape(na, nf, d), config=config.reshape(na, nf),
+    bm = BasinMap(f=f, A=A, wells=idx.reshape(na, nf, -1), config=config.reshape(na, nf),
                   result=code.reshape(na, nf), x_final=x1.reshape(na, nf, d), v_final=v1.reshape(na, nf, d),
                   steps=steps.reshape(na, nf))
     outcome = (code == RESULTS.successful._value) | (code == RESULTS.diverged._value) | (
@@ -609,9 +663,9 @@ def _native_sweep(model, settings, settings_t, x0, wells, fs, amps, progress, n_
     return [np.asarray(o) for o in (idx, config, code)] + [x1, v1, steps]
 
 
-def _classify_all(x1, v1, code, wells, span, settings):
+def _classify_all(x1, v1, code, wells, span, settings, couplers: bool = False):
     """`classify` over the points (leading axis of x1, v1, code)."""
-    return jax.vmap(lambda x, v, c: classify(x, v, c, wells, span, settings))(x1, v1, code)
+    return jax.vmap(lambda x, v, c: classify(x, v, c, wells, span, settings, couplers))(x1, v1, code)
 
 
 _classify_points = eqx.filter_jit(_classify_all)  # the native path's final states come from outside jit
@@ -623,7 +677,7 @@ def _finish(cat, first, f_np, a_np, d, stats, batching, throw):
     idx, config, code, x1, v1, steps = (o[first] for o in cat)
     n = first.size
     na, nf = a_np.size, f_np.size
-    bm = BasinMap(f=jnp.asarray(f_np), A=jnp.asarray(a_np), wells=jnp.asarray(idx.reshape(na, nf, d)),
+    bm = BasinMap(f=jnp.asarray(f_np), A=jnp.asarray(a_np), wells=jnp.asarray(idx.reshape(na, nf, -1)),
                   config=jnp.asarray(config.reshape(na, nf)), result=jnp.asarray(code.reshape(na, nf)),
                   x_final=jnp.asarray(x1.reshape(na, nf, d)), v_final=jnp.asarray(v1.reshape(na, nf, d)),
                   steps=jnp.asarray(steps.reshape(na, nf)))

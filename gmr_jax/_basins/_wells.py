@@ -37,7 +37,7 @@ def polynomial_wells(model: GlobalModel, x_range=None) -> list[np.ndarray]:
     matrix and two Newton steps; only those inside `x_range` (dof, 2) when it is given."""
     k = np.asarray(model.stiffness, float)
     out = []
-    for i in range(model.n_dof):
+    for i in range(k.shape[0]):
         c = np.trim_zeros(k[i], "b")
         if c.size < 2:
             out.append(np.zeros(0))
@@ -65,8 +65,8 @@ def stable_wells(model: AbstractMechanicalModel, x_range=None, n: int = 20001) -
     `x_range`, e.g. the span of the training data, to drop outer roots that lie outside it); other
     models need an `x_range`, searched on an `n`-point grid. Returns (dof, max_wells),
     NaN-padded. With no external load each cell of a chain is at rest only where its own
-    F_i(x_i) = 0."""
-    d = model.n_dof
+    F_i(x_i) = 0. On a `Graph` the cells are the elements (deformation intervals, (elements, 2))."""
+    d = model.n_elements
     if x_range is None:
         if not isinstance(model, GlobalModel):
             raise GMRInputError(
@@ -91,3 +91,45 @@ def stable_wells(model: AbstractMechanicalModel, x_range=None, n: int = 20001) -
                 roots = xs[idx] - fx[idx] * (xs[idx + 1] - xs[idx]) / (fx[idx + 1] - fx[idx])
                 out.append(roots)
     return pad_wells(out)
+
+
+def configuration(model: AbstractMechanicalModel, wells, pattern, iterations: int = 40) -> np.ndarray:
+    """The coordinates (node displacements on a `Graph`) of the stable equilibrium with cell
+    (element) e in its well `pattern[e]`: Newton on the force balance B' F_r(B u) = 0 from the
+    least-squares u with each multi-well element at that well.
+
+    **Arguments:** `model`; `wells` (cells, max_wells) from `stable_wells`; `pattern` (cells,)
+    well indices (ignored for one-well cells). Raises `GMRInputError` when Newton does not end
+    at a stable equilibrium (the pattern is not one of the model's configurations)."""
+    topo = model.topology
+    w = np.asarray(wells, float)
+    pat = np.asarray(pattern, int)
+    if pat.shape != (w.shape[0],) or np.any(pat < 0) or np.any(pat >= w.shape[1]):
+        raise GMRInputError(f"pattern must be one well index per cell ({w.shape[0]} of them, 0..{w.shape[1] - 1}), got "
+                            f"{pat.tolist()}")
+    multi = np.sum(np.isfinite(w), axis=1) >= 2
+    target = np.where(multi, w[np.arange(w.shape[0]), pat], 0.0)
+    d = model.n_dof
+    B = np.asarray(topo.deformations(np.eye(d))).T  # (cells, dof)
+    u0, *_ = np.linalg.lstsq(B[multi], target[multi], rcond=None)
+
+    def residual(u):
+        return jnp.asarray(B).T @ model.restoring(jnp.asarray(B) @ u)
+
+    @jax.jit
+    def newton(u):
+        step = lambda _, u: u - jnp.linalg.solve(jax.jacfwd(residual)(u), residual(u))  # noqa: E731
+        u = jax.lax.fori_loop(0, iterations, step, u)
+        return u, residual(u), jnp.linalg.eigvalsh(jax.jacfwd(residual)(u))
+
+    u, res, eig = (np.asarray(a) for a in newton(jnp.asarray(u0, float)))
+    cells = B @ u
+    lo, hi = np.nanmin(w, axis=1), np.nanmax(w, axis=1)
+    span = np.where(hi > lo, hi - lo, 1.0)
+    near = np.abs(cells - target) < 0.25 * span
+    if not (np.all(np.isfinite(u)) and np.max(np.abs(res)) < 1e-8 * (1.0 + np.max(np.abs(u)))
+            and np.min(eig) > 0 and np.all(near[multi])):
+        raise GMRInputError(f"no stable equilibrium with the cells in the wells {pat.tolist()} (force residual "
+                            f"{np.max(np.abs(res)):.2e}, smallest stiffness eigenvalue {np.min(eig):.3g}): not a "
+                            f"configuration of this model")
+    return u
