@@ -113,7 +113,7 @@ CASES = [
     ("basins: --cpu-devices 1.5", lambda: B + [F("chain"), *GRID, "--cpu-devices", "1.5", "--out", OUT()], 2,
      r"--cpu-devices: must be a whole number"),
     ("basins: --load unknown", lambda: B + [F("chain"), *GRID, "--load", "side", "--out", OUT()], 2,
-     r"invalid choice: 'side'"),
+     r"--load must be tip, base or node:K"),
     ("basins: --start malformed", lambda: B + [F("chain"), *GRID, "--start", "a-b", "--out", OUT()], 2,
      r"--start must look like 0-1-1-0-0"),
     ("basins: --start wrong length", lambda: B + [F("chain"), *GRID, "--start", "0-1-1", "--out", OUT()], 2,

@@ -153,7 +153,7 @@ def find_wells(model, spec, model_path=None):
     import gmr_jax as gmr
     from .._basins._wells import pad_wells, polynomial_wells
 
-    d = model.n_dof
+    d = model.n_elements
     if spec:
         lo, hi = x_range(spec)
         wells = gmr.stable_wells(model, [[lo, hi]] * d)
@@ -200,10 +200,22 @@ def draw_box(wells) -> np.ndarray:
     return np.stack([lo - half, hi + half], 1)
 
 
-def start_configuration(spec, wells):
-    """x0 from a configuration label like 0-1-1-0-0 (cell 0 first; a digit = that cell's well)."""
+def start_configuration(spec, wells, graph_model=None):
+    """x0 from a configuration label like 0-1-1-0-0 (cell 0 first; a digit = that cell's well). For
+    a `graph_model` the digits are the elements' wells (default: every element in its first) and
+    x0 the node displacements of that stable configuration (`configuration`)."""
+    if graph_model is not None:
+        from .._basins._wells import configuration
+
+        pattern = np.zeros(wells.shape[0], int) if spec is None else _digits(spec, wells)
+        return configuration(graph_model, wells, pattern)
     if spec is None:
         return None
+    idx = _digits(spec, wells)
+    return np.array([wells[i, k] for i, k in enumerate(idx)])
+
+
+def _digits(spec, wells) -> list[int]:
     try:
         idx = [int(c) for c in spec.split("-")]
     except ValueError:
@@ -212,7 +224,7 @@ def start_configuration(spec, wells):
     if len(idx) != wells.shape[0] or any(k < 0 or k >= n for k, n in zip(idx, n_wells)):
         raise GMRInputError(f"--start {spec!r}: need {wells.shape[0]} well indices, each below that DOF's "
                             f"number of wells {n_wells.tolist()}")
-    return np.array([wells[i, k] for i, k in enumerate(idx)])
+    return idx
 
 
 COLUMNS_HELP = ("map the recording's fields to the file's variables, as the lab stored them: "

@@ -1,5 +1,6 @@
 """`gmr basins MODEL.json --f F0:F1:NF --A A0:A1:NA --out DIR` (contracts, "Basin map")."""
 
+import argparse
 import time
 from pathlib import Path
 
@@ -7,6 +8,7 @@ import numpy as np
 
 from ._args import (draw_box, find_wells, grid, output_dir, positive_float, positive_int, recorded_range, start_configuration,
                     tolerance)
+from .._errors import GMRInputError
 from ._progress import stage
 
 
@@ -22,11 +24,11 @@ def register(sub):
                    help="free time after the load before the final state is judged, s (default: the model's own, "
                         "the time its slowest free vibration about its wells takes to decay a thousandfold, at "
                         "least 10 s; 10 s for a model whose free motion does not decay)")
-    b.add_argument("--load", choices=["tip", "base"], default="tip",
-                   help="tip: force A sin(2 pi f t) on the last mass (Eq. 25, default); base: the same half-sine "
-                   "as base acceleration (A in m/s^2)")
-    b.add_argument("--start", default=None, help="start configuration, e.g. 0-0-0-0-0 (default: every DOF in its "
-                   "first well)")
+    b.add_argument("--load", type=load_spec, default="tip",
+                   help="tip: force A sin(2 pi f t) on the last mass (Eq. 25, default); node:K: the same force on "
+                   "mass (node) K, counted from 0; base: the same half-sine as base acceleration (A in m/s^2)")
+    b.add_argument("--start", default=None, help="start configuration, e.g. 0-0-0-0-0, one well index per DOF (per "
+                   "element of a graph model; 0 for its one-well couplers) (default: every cell in its first well)")
     b.add_argument("--rtol", type=tolerance, default=1e-6, help="relative tolerance, 0 < rtol < 1 (default 1e-6)")
     b.add_argument("--atol", type=tolerance, default=1e-8, help="absolute tolerance, 0 < atol < 1 (default 1e-8)")
     b.add_argument("--batching", choices=["auto", "native", "lanes", "joint", "member"], default="auto",
@@ -81,8 +83,6 @@ def _probability(gmr, model, args, f, A, x0, settings, out, wells) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from .._errors import GMRInputError
 
     if model.covariance is None:
         raise GMRInputError(f"--draws: {args.model} has no covariance (a model written by gmr fit has one); "
@@ -232,6 +232,14 @@ def _beyond_speed(model, model_path, wells, x0) -> str | None:
             f"crossing record: gmr refine --free damping) before trusting the boundaries")
 
 
+def load_spec(text: str) -> str:
+    """--load: tip, base or node:K."""
+    head, _, k = text.partition(":")
+    if text in ("tip", "base") or (head == "node" and k.isdigit()):
+        return text
+    raise argparse.ArgumentTypeError(f"--load must be tip, base or node:K (K a mass index from 0), got {text!r}")
+
+
 def run(args) -> int:
     import gmr_jax as gmr
 
@@ -239,18 +247,22 @@ def run(args) -> int:
     import diffrax as dfx
     import jax
 
-    from ..plots._basins import basin_figure, well_label
+    from ..plots._basins import basin_figure, counts_figure, well_label
 
     f, A = grid(args.f, "f"), grid(args.A, "A")
     stage("loading the model, finding its wells")
     out = output_dir(args.out)
     model = gmr.load_model(args.model)
     wells, how = find_wells(model, args.x_range, args.model)
-    x0 = start_configuration(args.start, wells)
+    graph = isinstance(model.topology, gmr.Graph)
+    if graph and args.draws:
+        raise GMRInputError("--draws sweeps chains and independent DOFs; a graph model's map is swept once (drop "
+                            "--draws)")
+    x0 = start_configuration(args.start, wells, model if graph else None)
     if args.settle_time is None:
         from .._basins._settle import model_settle_time
 
-        need = model_settle_time(model, wells)
+        need = model_settle_time(model, wells, configurations=[x0] if graph else None)
         args.settle_time = 10.0 if need is None else need
         print(f"gmr basins: settle time {args.settle_time:g} s after the load ("
               + ("the model's slowest free vibration about its wells decays a thousandfold in it"
@@ -261,7 +273,7 @@ def run(args) -> int:
     n = f.size * A.size
     devs = jax.devices()
     print(f"gmr basins: {n} points ({A.size} amplitudes x {f.size} frequencies), {args.load} half-sine (Eq. 25), "
-          f"wells per DOF: {[np.round(w[~np.isnan(w)], 6).tolist() for w in wells]} ({how}); "
+          f"wells per {'element' if graph else 'DOF'}: {[np.round(w[~np.isnan(w)], 6).tolist() for w in wells]} ({how}); "
           f"{len(devs)} {devs[0].platform} device(s)" + (f" ({n_cpu} CPU cores)" if devs[0].platform == "cpu" else ""))
     t0 = time.perf_counter()
 
@@ -278,14 +290,22 @@ def run(args) -> int:
     wall = time.perf_counter() - t0
     print()
     cat = {key: np.asarray(getattr(bm, key)) for key in ("wells", "config", "result", "x_final", "v_final", "steps")}
+    cat["counts"] = np.asarray(bm.counts())
     np.savez(out / "basins.npz", f=f, A=A, **cat)
-    beyond = _beyond_data(model, args.model, A, args.load)
-    basin_figure(f, A, cat["config"], model.n_dof, out / "basins.png",
-                 title=f"{Path(args.model).stem}: final configuration, {args.load} half-sine (Eq. 25)", wells=wells,
-                 load=args.load, extrapolated_above=beyond[1] if beyond else None)
-    vals, counts = np.unique(cat["config"], return_counts=True)
-    for v, c in zip(vals, counts):
-        print(f"  {well_label(int(v), model.n_dof, wells):22s} {c:7d} points")
+    beyond = None if graph or args.load.startswith("node") else _beyond_data(model, args.model, A, args.load)
+    title = f"{Path(args.model).stem}: final configuration, {args.load} half-sine (Eq. 25)"
+    if graph:
+        counts_figure(f, A, cat["counts"], out / "basins.png", title=title, load=args.load)
+        vals, counts = np.unique(cat["counts"], return_counts=True)
+        for v, c in zip(vals, counts):
+            label = "not classified" if v < 0 else f"{int(v)} element(s) outside their first well"
+            print(f"  {label:40s} {c:7d} points")
+    else:
+        basin_figure(f, A, cat["config"], model.n_dof, out / "basins.png", title=title, wells=wells,
+                     load=args.load, extrapolated_above=beyond[1] if beyond else None)
+        vals, counts = np.unique(cat["config"], return_counts=True)
+        for v, c in zip(vals, counts):
+            print(f"  {well_label(int(v), model.n_dof, wells):22s} {c:7d} points")
     bad = cat["config"] < 0
     if np.any(bad):
         from .._solution import code_name
@@ -305,7 +325,7 @@ def run(args) -> int:
         _probability(gmr, model, args, f, A, x0, settings, out, wells)
     if beyond:
         print(f"  note: {beyond[0]}")
-    fast = _beyond_speed(model, args.model, wells, x0)
+    fast = None if graph else _beyond_speed(model, args.model, wells, x0)
     if fast:
         print(f"  note: {fast}")
     print(f"wrote {out}/basins.npz and basins.png (.pdf)")

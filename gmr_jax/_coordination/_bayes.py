@@ -166,7 +166,8 @@ def group_factors(rows, target, valid):
     group the factor F_g (P + 1, P + 1) of its valid rows [Phi | y] and the row count n_g."""
     p = rows.shape[-1] + 1
     X = jnp.concatenate([rows, target[..., None]], axis=-1) * valid[..., None]
-    F = jax.vmap(lambda a: jnp.linalg.qr(jnp.concatenate([a, jnp.zeros((p, p))]), mode="r"))(X)
+    # one group after another: a batch of LAPACK QRs can hang the CPU thread pool (`_fit/_householder.py`)
+    F = jax.lax.map(lambda a: jnp.linalg.qr(jnp.concatenate([a, jnp.zeros((p, p))]), mode="r"), X)
     return F, jnp.sum(valid.astype(rows.dtype), axis=-1)
 
 

@@ -115,3 +115,32 @@ def basin_figure(f, A, config, n_dof: int, path=None, title: str = "", *, ax=Non
     if path is not None:  # PNG (or the suffix given) and a PDF beside it
         save_with_pdf(fig, path)
     return fig
+
+
+def counts_figure(f, A, counts, path=None, title: str = "", *, ax=None, load: str | None = None) -> Figure:
+    """A lattice's basin map: per (f, A) point the number of elements outside their first well
+    (`BasinMap.counts`; dark grey: not settled or failed), one colour per count. Draws into `ax`
+    when given, else a new figure; saved to `path` (and a PDF beside it) when given."""
+    counts = np.asarray(counts)
+    values = sorted(set(counts.ravel().tolist()))
+    index = {v: k for k, v in enumerate(values)}
+    img = np.vectorize(index.get)(counts)
+    top = max(1, max(values))
+    cm = matplotlib.colormaps["viridis"]
+    colors = [(0.25, 0.25, 0.25, 1.0) if v < 0 else cm(v / top) for v in values]
+    if ax is None:
+        fig = Figure(figsize=(7.5, 5), layout="constrained")
+        ax = fig.subplots()
+    else:
+        fig = ax.figure
+    ax.pcolormesh(np.asarray(f), np.asarray(A), img, cmap=ListedColormap(colors),
+                  norm=BoundaryNorm(np.arange(len(values) + 1) - 0.5, len(values)), shading="auto")
+    handles = [Rectangle((0, 0), 1, 1, color=c) for c in colors]
+    ax.legend(handles, ["not settled" if v < 0 else str(v) for v in values], title="elements switched",
+              bbox_to_anchor=(1.02, 1), loc="upper left", fontsize=7, ncol=1 if len(values) <= 16 else 2)
+    ax.set_xlabel("actuation frequency f [Hz]")
+    ax.set_ylabel("actuation amplitude A " + ("[m/s²] (base acceleration)" if load == "base" else "[N] (node force)"))
+    ax.set_title(title or "lattice basins (half-sine, Eq. 25)")
+    if path is not None:
+        save_with_pdf(fig, path)
+    return fig
