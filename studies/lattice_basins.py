@@ -1,0 +1,125 @@
+"""Basin map of the 4 x 4 grid of bistable trusses: the reconstructed model against the truth.
+
+The grid (`gmr.systems.grid()`) is recorded at 2 % of the interwell distance, 50 dB, around its four
+configurations and reconstructed (`reconstruct(recs, topology=graph, designs=system.designs)`).
+Both the model and the truth start with every truss in its second (shallow) well and are pulled at
+one node by the Eq. (25) half-sine (`SweepSettings(load="node:K")`, a negative amplitude: towards
+the deep well); each point is classified by every element's well (`BasinMap.wells`) and by the
+number of elements switched (`BasinMap.counts`). Agreement: the share of points whose model pattern
+(every element's well) equals the truth's. Peer: SciPy's `solve_ivp` (RK45, the same tolerances) on
+the truth's equations, point by point, on a subset of the grid, its time per point scaled to the grid.
+
+    python studies/lattice_basins.py [--n 50] [--node 5] [--peer 60] [--out results/lattice_basins.md]
+"""
+
+import argparse
+import time
+import warnings
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy.integrate import solve_ivp
+
+import gmr_jax as gmr
+
+RESULTS = Path(__file__).resolve().parents[1] / "results"
+
+
+def peer_final(model, x0, f, a, node, settle, wells, rtol, atol):
+    """SciPy RK45 of the truth under the pull, classified as `basin_map` does (per element)."""
+    d = model.n_dof
+    acc = jax.jit(lambda x, v, p: model.accelerations(x, v, 0.0, jnp.zeros(d).at[node].set(p)))
+
+    def rhs(t, y):
+        p = a * np.sin(2 * np.pi * f * t) if t <= 0.5 / f else 0.0
+        return np.concatenate([y[d:], np.asarray(acc(jnp.asarray(y[:d]), jnp.asarray(y[d:]), p))])
+
+    sol = solve_ivp(rhs, (0.0, 0.5 / f + settle), np.concatenate([x0, np.zeros(d)]), rtol=rtol, atol=atol)
+    dfm = np.asarray(model.topology.deformations(jnp.asarray(sol.y[:d, -1])))
+    return [int(np.nanargmin(np.abs(dfm[e] - wells[e]))) if np.sum(np.isfinite(wells[e])) > 1 else 0
+            for e in range(wells.shape[0])]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=50)
+    ap.add_argument("--node", type=int, default=5)
+    ap.add_argument("--fmin", type=float, default=0.03)
+    ap.add_argument("--fmax", type=float, default=1.5)
+    ap.add_argument("--amin", type=float, default=-60.0)
+    ap.add_argument("--amax", type=float, default=-1.0)
+    ap.add_argument("--settle", type=float, default=150.0)
+    ap.add_argument("--peer", type=int, default=60, help="points integrated by the SciPy peer")
+    ap.add_argument("--out", default=str(RESULTS / "lattice_basins.md"))
+    args = ap.parse_args()
+    system = gmr.systems.grid()
+    truth, graph = system.truth, system.truth.topology
+    from gmr_jax.systems._lattice import truss_wells
+
+    span = float(np.diff(truss_wells())[0])
+    recs = gmr.systems.make_recordings(system, 0.02 * span, snr_db=50.0, seed=0)
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = gmr.reconstruct(recs, topology=graph, designs=system.designs).value
+    t_fit = time.perf_counter() - t0
+    wells_t = gmr.stable_wells(truth, system.x_range)
+    wells_m = gmr.stable_wells(model, system.x_range)
+    second = np.where(np.sum(np.isfinite(wells_t), axis=1) > 1, 1, 0)
+    x0_t = gmr.configuration(truth, wells_t, second)
+    x0_m = gmr.configuration(model, wells_m, second)
+    f = np.linspace(args.fmin, args.fmax, args.n)
+    A = np.linspace(args.amin, args.amax, args.n)
+    st = gmr.SweepSettings(settle_time=args.settle, load=f"node:{args.node}")
+    maps, secs = {}, {}
+    for name, m, w, x0 in (("truth", truth, wells_t, x0_t), ("model", model, wells_m, x0_m)):
+        gmr.basin_map(m, f[:2], A[:2], w, x0=x0, settings=st, throw=False)  # compile apart
+        t0 = time.perf_counter()
+        maps[name] = gmr.basin_map(m, f, A, w, x0=x0, settings=st, throw=False)
+        secs[name] = time.perf_counter() - t0
+    bt, bm = maps["truth"].value, maps["model"].value
+    pt, pm = np.asarray(bt.wells), np.asarray(bm.wells)
+    same = np.all(pt == pm, axis=-1) & np.all(pt >= 0, axis=-1)
+    ct, cm = np.asarray(bt.counts()), np.asarray(bm.counts())
+    rng = np.random.default_rng(0)
+    pick = rng.choice(f.size * A.size, size=min(args.peer, f.size * A.size), replace=False)
+    t0 = time.perf_counter()
+    agree_peer = 0
+    for k in pick:
+        i, j = divmod(int(k), f.size)
+        want = peer_final(truth, x0_t, f[j], A[i], args.node, args.settle, wells_t, 1e-6, 1e-8)
+        agree_peer += int(want == list(pt[i, j]))
+    per_point = (time.perf_counter() - t0) / pick.size
+    n = f.size * A.size
+    vals, cnt = np.unique(ct, return_counts=True)
+    lines = [
+        "# Lattice basins: the 4 x 4 grid, model against truth",
+        "",
+        f"`python studies/lattice_basins.py --n {args.n} --node {args.node} --peer {args.peer}` (module docstring: "
+        "definitions). 2-core dev machine, float64.",
+        "",
+        f"Grid {args.n} x {args.n}: f {args.fmin:g}-{args.fmax:g} Hz, A {args.amin:g} to {args.amax:g} (a pull on node "
+        f"{args.node}), settle {args.settle:g} s, from every truss in its second well. Fit: {t_fit:.1f} s (first call).",
+        "",
+        "| measure | value |",
+        "|---|---|",
+        f"| points where the model's pattern (every element's well) is the truth's | {100 * same.mean():.1f} % |",
+        f"| points where the number of switched elements agrees | {100 * np.mean(ct == cm):.1f} % |",
+        f"| truth's classes (elements switched: points) | " + ", ".join(f"{int(v)}: {c}" for v, c in zip(vals, cnt))
+        + " |",
+        f"| model's map, unsettled or failed points | {int(np.sum(cm < 0))} |",
+        f"| sweep time, truth / model (lanes, compiled apart) | {secs['truth']:.1f} s / {secs['model']:.1f} s |",
+        f"| SciPy solve_ivp (RK45) on the truth, per point | {1e3 * per_point:.0f} ms ({per_point * n:.0f} s for the "
+        f"grid, {per_point * n / secs['truth']:.0f}x the lanes sweep of the truth) |",
+        f"| SciPy's final pattern equal to the lanes sweep's (truth) | {agree_peer}/{pick.size} |",
+        "",
+    ]
+    text = "\n".join(lines)
+    print(text)
+    Path(args.out).write_text(text)
+
+
+if __name__ == "__main__":
+    main()
