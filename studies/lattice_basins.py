@@ -2,6 +2,7 @@
 
 The grid (`gmr.systems.grid()`) is recorded at 2 % of the interwell distance, 50 dB, around its four
 configurations and reconstructed (`reconstruct(recs, topology=graph, designs=system.designs)`).
+The model's restoring laws with the truth's damping are swept too (what the laws alone reach).
 Both the model and the truth start with every truss in its second (shallow) well and are pulled at
 one node by the Eq. (25) half-sine (`SweepSettings(load="node:K")`, a negative amplitude: towards
 the deep well); each point is classified by every element's well (`BasinMap.wells`) and by the
@@ -17,7 +18,6 @@ import time
 import warnings
 from pathlib import Path
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -28,18 +28,37 @@ RESULTS = Path(__file__).resolve().parents[1] / "results"
 
 
 def peer_final(model, x0, f, a, node, settle, wells, rtol, atol):
-    """SciPy RK45 of the truth under the pull, classified as `basin_map` does (per element)."""
+    """SciPy RK45 of the truth under the pull (its equations written in NumPy, as a user would),
+    classified as `basin_map` does (per element)."""
     d = model.n_dof
-    acc = jax.jit(lambda x, v, p: model.accelerations(x, v, 0.0, jnp.zeros(d).at[node].set(p)))
+    B = np.asarray(model.topology.incidence)  # (E, D)
+    k, w, rise, p0, s, c, c2, m = (np.asarray(getattr(model, n), float) for n in
+                                   ("k", "w", "rise", "p", "s", "c", "c2", "masses"))
+    l0 = np.sqrt(w**2 + rise**2)
 
     def rhs(t, y):
-        p = a * np.sin(2 * np.pi * f * t) if t <= 0.5 / f else 0.0
-        return np.concatenate([y[d:], np.asarray(acc(jnp.asarray(y[:d]), jnp.asarray(y[d:]), p))])
+        x, v = y[:d], y[d:]
+        e, ev = B @ x, B @ v
+        force = k * e * (1.0 - l0 / np.sqrt(w**2 + e**2)) + p0 + s * e + c * ev + c2 * ev * np.abs(ev)
+        load = np.zeros(d)
+        load[node] = a * np.sin(2 * np.pi * f * t) if t <= 0.5 / f else 0.0
+        return np.concatenate([v, (load - B.T @ force) / m])
 
     sol = solve_ivp(rhs, (0.0, 0.5 / f + settle), np.concatenate([x0, np.zeros(d)]), rtol=rtol, atol=atol)
     dfm = np.asarray(model.topology.deformations(jnp.asarray(sol.y[:d, -1])))
     return [int(np.nanargmin(np.abs(dfm[e] - wells[e]))) if np.sum(np.isfinite(wells[e])) > 1 else 0
             for e in range(wells.shape[0])]
+
+
+def with_true_damping(model, truth):
+    """The model's restoring laws with the truth's damping c d' + c2 d'|d'| on every element."""
+    graph = truth.topology
+    terms = [t for t in model.terms() if t["physics"] == "stiffness"]
+    for e in range(graph.n_elements):
+        for order, c in ((1, float(truth.c[e])), (2, float(truth.c2[e]))):
+            if c:
+                terms.append({"element": e, "physics": "velocity_damping", "order": order, "coefficient": c})
+    return gmr.from_terms(np.asarray(model.masses), terms, graph)
 
 
 def main():
@@ -73,8 +92,10 @@ def main():
     f = np.linspace(args.fmin, args.fmax, args.n)
     A = np.linspace(args.amin, args.amax, args.n)
     st = gmr.SweepSettings(settle_time=args.settle, load=f"node:{args.node}")
+    mixed = with_true_damping(model, truth)
     maps, secs = {}, {}
-    for name, m, w, x0 in (("truth", truth, wells_t, x0_t), ("model", model, wells_m, x0_m)):
+    for name, m, w, x0 in (("truth", truth, wells_t, x0_t), ("model", model, wells_m, x0_m),
+                           ("laws", mixed, wells_m, x0_m)):
         gmr.basin_map(m, f[:2], A[:2], w, x0=x0, settings=st, throw=False)  # compile apart
         t0 = time.perf_counter()
         maps[name] = gmr.basin_map(m, f, A, w, x0=x0, settings=st, throw=False)
@@ -83,6 +104,8 @@ def main():
     pt, pm = np.asarray(bt.wells), np.asarray(bm.wells)
     same = np.all(pt == pm, axis=-1) & np.all(pt >= 0, axis=-1)
     ct, cm = np.asarray(bt.counts()), np.asarray(bm.counts())
+    pl = np.asarray(maps["laws"].value.wells)
+    same_laws = np.all(pt == pl, axis=-1) & np.all(pt >= 0, axis=-1)
     rng = np.random.default_rng(0)
     pick = rng.choice(f.size * A.size, size=min(args.peer, f.size * A.size), replace=False)
     t0 = time.perf_counter()
@@ -107,11 +130,12 @@ def main():
         "|---|---|",
         f"| points where the model's pattern (every element's well) is the truth's | {100 * same.mean():.1f} % |",
         f"| points where the number of switched elements agrees | {100 * np.mean(ct == cm):.1f} % |",
-        f"| truth's classes (elements switched: points) | " + ", ".join(f"{int(v)}: {c}" for v, c in zip(vals, cnt))
+        f"| the same with the model's laws and the truth's damping (pattern) | {100 * same_laws.mean():.1f} % |",
+        "| truth's classes (elements switched: points) | " + ", ".join(f"{int(v)}: {c}" for v, c in zip(vals, cnt))
         + " |",
         f"| model's map, unsettled or failed points | {int(np.sum(cm < 0))} |",
         f"| sweep time, truth / model (lanes, compiled apart) | {secs['truth']:.1f} s / {secs['model']:.1f} s |",
-        f"| SciPy solve_ivp (RK45) on the truth, per point | {1e3 * per_point:.0f} ms ({per_point * n:.0f} s for the "
+        f"| SciPy solve_ivp (RK45, NumPy equations) on the truth, per point | {1e3 * per_point:.0f} ms ({per_point * n:.0f} s for the "
         f"grid, {per_point * n / secs['truth']:.0f}x the lanes sweep of the truth) |",
         f"| SciPy's final pattern equal to the lanes sweep's (truth) | {agree_peer}/{pick.size} |",
         "",
