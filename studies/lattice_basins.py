@@ -75,16 +75,14 @@ def main():
     args = ap.parse_args()
     system = gmr.systems.grid()
     truth, graph = system.truth, system.truth.topology
-    from gmr_jax.systems._lattice import truss_wells
-
-    span = float(np.diff(truss_wells())[0])
+    wells_t = gmr.stable_wells(truth, system.x_range)
+    span = float(np.nanmax(wells_t[0]) - np.nanmin(wells_t[0]))  # a truss's interwell distance
     recs = gmr.systems.make_recordings(system, 0.02 * span, snr_db=50.0, seed=0)
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         model = gmr.reconstruct(recs, topology=graph, designs=system.designs).value
     t_fit = time.perf_counter() - t0
-    wells_t = gmr.stable_wells(truth, system.x_range)
     wells_m = gmr.stable_wells(model, system.x_range)
     second = np.where(np.sum(np.isfinite(wells_t), axis=1) > 1, 1, 0)
     x0_t = gmr.configuration(truth, wells_t, second)

@@ -255,7 +255,7 @@ CASES = [
     ("sweep_settle_nan", lambda: g.SweepSettings(settle_time=float("nan")), r"SweepSettings.settle_time must be finite"),
     ("sweep_x_tol_zero", lambda: g.SweepSettings(x_tol=0.0), r"SweepSettings.x_tol must be > 0"),
     ("sweep_box_inside_wells", lambda: g.SweepSettings(box_spans=0.2), r"SweepSettings.box_spans must be > 0.5"),
-    ("sweep_load", lambda: g.SweepSettings(load="top"), r"SweepSettings.load must be one of \('tip', 'base'\), got 'top'"),
+    ("sweep_load", lambda: g.SweepSettings(load="top"), r"SweepSettings.load must be one of \('tip', 'base'\) or 'node:K' \(a force on mass K, from 0\), got 'top'"),
     ("sweep_batching", lambda: g.SweepSettings(batching="vmap"), r"SweepSettings.batching must be one of \('auto', 'native', 'lanes', 'joint', 'member'\)"),
     ("sweep_sign_eps", lambda: g.SweepSettings(sign_eps=-1.0), r"SweepSettings.sign_eps must be >= 0, got -1.0; give the velocity scale"),
     ("sweep_solver", lambda: g.SweepSettings(solver="rk4"), r"SweepSettings.solver must be one of \('tsit5', 'dopri5', 'dopri8'\)"),
