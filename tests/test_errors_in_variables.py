@@ -152,8 +152,6 @@ def test_fit_local_with_x_noise_keeps_the_recorded_covariance():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the noise of x inside the regressors is not in the likelihood (errors in "
-                   "variables): at 30 dB the band misses the slopes' attenuation on some cells")
 def test_noisy_chain_band_holds_the_truth():
     """2-cell cubic chain, 30 dB on every channel: noise on x inside the regressors biases a plain
     regression's slopes; the default route's error stays small and its band holds the truth on
