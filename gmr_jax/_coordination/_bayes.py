@@ -145,10 +145,21 @@ def weak_rows(
     return rows, target, valid
 
 
+def well_statistics(rows, target, valid, well: Int[Array, " records"], n_wells: int):
+    """Per well: Gram matrix G_w, moment b_w, sum of squares yy_w and row count n_w."""
+    wv = valid.astype(rows.dtype)
+    one_hot = jax.nn.one_hot(well, n_wells, dtype=rows.dtype)  # (R, W)
+    G = jnp.einsum("rw,rm,rmi,rmj->wij", one_hot, wv, rows, rows)
+    b = jnp.einsum("rw,rm,rmi,rm->wi", one_hot, wv, rows, target)
+    yy = jnp.einsum("rw,rm,rm->w", one_hot, wv, target**2)
+    n = jnp.einsum("rw,rm->w", one_hot, wv)
+    return G, b, yy, n
+
+
 def well_factors(rows, target, valid, well: Int[Array, " records"], n_wells: int):
     """Per well: the triangular factor F_w (P + 1, P + 1) of its valid rows [Phi | y], so that
-    F_w' F_w = [[G_w, b_w], [b_w', yy_w]] (Gram matrix G_w, moment b_w, sum of squares yy_w:
-    the evidence from the square-root form needs no difference of large sums), and the row count n_w."""
+    F_w' F_w = [[G_w, b_w], [b_w', yy_w]] (the square-root form of `well_statistics`: the
+    evidence from it needs no difference of large sums), and the row count n_w."""
     p = rows.shape[-1] + 1
     X = jnp.concatenate([rows, target[..., None]], axis=-1) * valid[..., None]
 
@@ -159,16 +170,6 @@ def well_factors(rows, target, valid, well: Int[Array, " records"], n_wells: int
     F = jax.vmap(factor)(jnp.arange(n_wells))
     n = jnp.einsum("rw,rm->w", jax.nn.one_hot(well, n_wells, dtype=rows.dtype), valid.astype(rows.dtype))
     return F, n
-
-
-def group_factors(rows, target, valid):
-    """`well_factors` of rows already grouped: rows (G, M, P), target and valid (G, M) give per
-    group the factor F_g (P + 1, P + 1) of its valid rows [Phi | y] and the row count n_g."""
-    p = rows.shape[-1] + 1
-    X = jnp.concatenate([rows, target[..., None]], axis=-1) * valid[..., None]
-    # one group after another: a batch of LAPACK QRs can hang the CPU thread pool (`_fit/_householder.py`)
-    F = jax.lax.map(lambda a: jnp.linalg.qr(jnp.concatenate([a, jnp.zeros((p, p))]), mode="r"), X)
-    return F, jnp.sum(valid.astype(rows.dtype), axis=-1)
 
 
 class Hyper(eqx.Module):

@@ -8,20 +8,21 @@ families of `_bayes`: Chebyshev restoring law, velocity and position damping, ea
 to its own elements' span and speed). Columns of the elements of a design at a node add up.
 
 The prior is `_bayes`'s per design (a scale and a geometric decay per family and design); each
-(record, node) has its own noise variance. The hyperparameters maximise the evidence times the
-hyperprior, for each restoring degree K = 1..`degree` (one K for every design), and the degrees
-are weighted by p(K | rows), as `_bayes.posterior`. The evidence is `_bayes`'s, from the groups'
-square-root factors (`_bayes._gaussian`); only the prior's scales and decays per design differ.
+(record, node) has its own noise variance. The hyperparameters maximise the evidence, for each
+restoring degree K = 1..`degree` (one K for every design), and the degrees are weighted by
+p(K | rows): the mean of the most probable K, the mixture's covariance about it, as `_bayes`.
+`_solve` and `_optimise` are `_bayes`'s with the prior's scales and decays per design.
 """
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 from jaxtyping import Array, Float
 
 from .._solution import RESULTS, Solution, as_result
-from ._bayes import HYPER_SD, OFF, Basis, _covariance, _gaussian, _minimise, _weighted
+from ._bayes import _ADJOINT, OFF, Basis
 
 
 class GraphHyper(eqx.Module):
@@ -33,9 +34,9 @@ class GraphHyper(eqx.Module):
 
 
 class GraphPosterior(eqx.Module):
-    """The posterior of all designs' scaled coefficients (designs * P,), a mixture over the
-    restoring degree: `mean` and `covariance` of the mixture; per degree the hyperparameters, the
-    log evidence (times the hyperprior) and the weight p(K | rows)."""
+    """The posterior of all designs' scaled coefficients (designs * P,): `mean` at the most probable
+    restoring degree, `covariance` of the mixture over the degrees about it; per degree the
+    hyperparameters, the log evidence and the weight p(K | rows)."""
 
     mean: Float[Array, " q"]
     covariance: Float[Array, "q q"]
@@ -53,52 +54,56 @@ def prior_sd(h: GraphHyper, basis: Basis):
 
 
 def _solve(h: GraphHyper, stats, basis: Basis, active):
-    F, n = stats
+    G, b, yy, n = stats
+    beta = jnp.exp(-h.log_noise)
     sq = prior_sd(h, basis) * active
-    X, t, log_beta = _weighted(F, h.log_noise)
-    p = F.shape[-1]
-    mean, chol, log_ev = _gaussian(sq, X.reshape(-1, p - 1), t.reshape(-1), jnp.sum(n * log_beta), jnp.sum(n))
-    return mean, chol, sq, log_ev
-
-
-def log_hyperprior(h: GraphHyper):
-    """`_bayes.log_hyperprior` for every design and family: normals of sd `HYPER_SD` on the log
-    scales and logit decays, flat on the log noise variances."""
-    return -0.5 * (jnp.sum((h.log_scale / HYPER_SD[0]) ** 2) + jnp.sum((h.logit_decay / HYPER_SD[1]) ** 2))
+    Gs = jnp.einsum("w,wij->ij", beta, G)
+    bs = jnp.einsum("w,wi->i", beta, b)
+    A = jnp.eye(sq.shape[0]) + sq[:, None] * Gs * sq[None, :]
+    chol = jnp.linalg.cholesky(A)
+    z = jax.scipy.linalg.cho_solve((chol, True), sq * bs)
+    logdet = 2.0 * jnp.sum(jnp.log(jnp.diag(chol)))
+    fit = jnp.sum(beta * yy) - jnp.dot(sq * bs, z)
+    log_ev = 0.5 * (jnp.sum(n * jnp.log(beta)) - fit - logdet - jnp.sum(n) * jnp.log(2.0 * jnp.pi))
+    return sq * z, chol, sq, log_ev
 
 
 def _initial(stats, n_designs: int, decay: float) -> GraphHyper:
-    F, n = stats
-    var = jnp.sum(F[..., -1] ** 2, axis=-1) / jnp.maximum(n, 1.0)
+    _, _, yy, n = stats
+    var = yy / jnp.maximum(n, 1.0)
     return GraphHyper(jnp.zeros((n_designs, 3)), jnp.full((n_designs, 3), jnp.log(decay / (1.0 - decay))),
                       jnp.log(1e-2 * var + 1e-30))
 
 
 def _optimise(stats, basis: Basis, n_designs: int, active, max_steps: int):
     def loss(h, args):
-        return -(_solve(h, args, basis, active)[3] + log_hyperprior(h)) / jnp.maximum(jnp.sum(args[1]), 1.0)
+        return -_solve(h, args, basis, active)[3] / jnp.maximum(jnp.sum(args[3]), 1.0)
 
-    h, code = _minimise(loss, [_initial(stats, n_designs, decay) for decay in (0.3, 0.7)], stats, max_steps)
+    solver = optx.BFGS(rtol=1e-7, atol=1e-7)
+    sols = [optx.minimise(loss, solver, _initial(stats, n_designs, decay), args=stats, max_steps=max_steps,
+                          throw=False, adjoint=_ADJOINT)
+            for decay in (0.3, 0.7)]
+    vals = [loss(sl.value, stats) for sl in sols]
+    better = vals[1] < vals[0]
+    h = jax.tree_util.tree_map(lambda a, b_: jnp.where(better, a, b_), sols[1].value, sols[0].value)
+    code = RESULTS.where(better, RESULTS.promote(sols[1].result), RESULTS.promote(sols[0].result))
     mean, chol, sq, log_ev = _solve(h, stats, basis, active)
-    return h, mean, _covariance(chol, sq), log_ev + log_hyperprior(h), code._value
+    inv = jax.scipy.linalg.cho_solve((chol, True), jnp.eye(sq.shape[0]))
+    return h, mean, sq[:, None] * inv * sq[None, :], log_ev, code._value
 
 
 def graph_posterior(stats, basis: Basis, n_designs: int, *, max_steps: int = 1024) -> Solution:
-    """Posterior of every design's scaled coefficients from per-group factors `(F, n)`
-    (`_bayes.group_factors` of the node rows, columns design-major), a mixture over the
-    restoring degree as `_bayes.posterior`. Jittable (`n_designs` static). **Returns:** a
-    `Solution` with a `GraphPosterior` and the optimiser's `RESULTS` code (at the most probable
-    degree)."""
+    """Posterior of every design's scaled coefficients from per-group statistics `(G, b, yy, n)`
+    (`_bayes.well_statistics` of the node rows, columns design-major). Jittable (`n_designs`
+    static). **Returns:** a `Solution` with a `GraphPosterior` and the optimiser's `RESULTS` code."""
     fam = np.tile(basis.family(), n_designs)
     order = np.tile(np.concatenate([np.arange(k) for k in basis.sizes]), n_designs)
     degrees = np.arange(1, basis.degree + 1)
     active = jnp.asarray(np.stack([np.where(fam == 0, order <= k, True) for k in degrees]).astype(float))
-    # the degrees one after another (`jax.lax.map`): a batch of LAPACK factorisations over them can hang the
-    # CPU thread pool (`_fit/_householder.py`)
-    h, means, covs, log_ev, codes = jax.lax.map(lambda a: _optimise(stats, basis, n_designs, a, max_steps), active)
+    h, means, covs, log_ev, codes = jax.vmap(lambda a: _optimise(stats, basis, n_designs, a, max_steps))(active)
     weight = jax.nn.softmax(jnp.where(jnp.isfinite(log_ev), log_ev, -jnp.inf))
     best = jnp.argmax(weight)
-    mean = jnp.einsum("k,ki->i", weight, means)
+    mean = means[best]
     dev = means - mean[None, :]
     cov = jnp.einsum("k,kij->ij", weight, covs) + jnp.einsum("k,ki,kj->ij", weight, dev, dev)
     absent = (jnp.diagonal(cov) < OFF**2) & (jnp.abs(mean) < OFF)

@@ -78,7 +78,7 @@ def graph_arrays(
     target = target.reshape(r_ * d_, -1)
     scale = jnp.sqrt(jnp.sum(valid * target**2) / jnp.maximum(jnp.sum(valid), 1.0))
     groups = r_ * d_
-    stats = _bayes.group_factors(node_rows, target.reshape(groups, -1) / scale, valid.reshape(groups, -1))
+    stats = _bayes.well_statistics(node_rows, target / scale, valid, jnp.arange(groups), groups)
     sol = graph_posterior(stats, basis, n_designs)
     M = jax.vmap(lambda c, h, sp: _bayes.to_monomials(basis, c, h, sp, scale))(centre, half, speed)  # (G, Q, P)
     mean = sol.value.mean.reshape(n_designs, basis.n)
