@@ -353,7 +353,8 @@ def _labels(designs, d: int):
     lab = np.asarray(designs)
     if lab.shape != (d,) or not np.issubdtype(lab.dtype, np.integer):
         raise GMRInputError(f"designs must be one integer label per DOF ({d} of them), got {lab.tolist()!r}; "
-                            f"DOFs with one label share one law, e.g. designs=[0] * {d} for cells of one design")
+                            f"DOFs with one label share one law, e.g. {[0] * d} (gmr fit --designs {','.join(['0'] * d)}) for cells "
+                            f"of one design")
     return lab
 
 
