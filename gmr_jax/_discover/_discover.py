@@ -226,16 +226,18 @@ def _short_runs(model, recs, sims, always: bool = False) -> dict:
 ABSENT = 1e-9
 
 
-def absent(model: GlobalModel, term: Term, recs) -> bool:
-    """Whether `term`'s force in `model` is below `ABSENT` x the RMS of the model's force on its DOF over `recs`."""
+def absent(model: GlobalModel, term: Term, recs, force_rms: float | None = None) -> bool:
+    """Whether `term`'s force in `model` is below `ABSENT` x the RMS of the model's force on its DOF over `recs`
+    (`force_rms`, computed when not given)."""
     x = np.concatenate([r.x[:, term.dof] for r in recs])
     v = np.concatenate([r.v[:, term.dof] for r in recs])
-    full = np.concatenate([model_force(model, r.x, r.v)[:, term.dof] for r in recs])
+    if force_rms is None:
+        force_rms = float(np.sqrt(np.mean(np.concatenate([model_force(model, r.x, r.v)[:, term.dof] for r in recs]) ** 2)))
     c = {(t["physics"], t["order"]): t["coefficient"] for t in model.terms() if t["dof"] == term.dof}
     coef = c.get((term.family, term.order), 0.0) + (
         c.get((POSITION_DAMPING, 0), 0.0) if (term.family, term.order) == (VELOCITY_DAMPING, 1) else 0.0)
     part = coef * basis(term, x, v)
-    return bool(np.sqrt(np.mean(part**2)) < ABSENT * np.sqrt(np.mean(full**2)))
+    return bool(np.sqrt(np.mean(part**2)) < ABSENT * force_rms)
 
 
 def posterior_of(model: GlobalModel, dof: int, terms: list[Term]) -> np.ndarray | None:
@@ -365,7 +367,8 @@ def discover(
     new_terms, mass_corr = [], np.zeros(d)
     series = {"resid_before": [], "resid_after": [], "x": [], "v": [], "t": []}
     for i in range(d):
-        base = [t for t in model_terms(model, i) if not absent(model, t, recs)]
+        f_rms = float(np.sqrt(np.mean(np.concatenate([model_force(model, r.x, r.v)[:, i] for r in recs]) ** 2)))
+        base = [t for t in model_terms(model, i) if not absent(model, t, recs, f_rms)]
         cands = [t for t in catalogue if t.dof == i and t not in base
                  and not (t.family == "position_damping" and t.order == 0)
                  and not (unseen and t.family == "stiffness" and t.order == 0)]
