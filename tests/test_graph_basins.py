@@ -99,3 +99,31 @@ def test_graph_sweep_refusals(grid):
         g.basin_map(s.truth, [1.0], [1.0], wells, x0=x0, settings=g.SweepSettings(batching="joint"))
     with pytest.raises(g.GMRInputError, match="node:K"):
         g.SweepSettings(load="node:x")
+
+
+def test_cli_basins_on_a_graph_model(tmp_path, capsys):
+    """`gmr basins` on a graph model file: a push on node 0 from every element in its first
+    well; basins.npz carries each element's well and the count of elements switched."""
+    from gmr_jax._cli._main import main
+
+    graph = g.Graph(2, [[-1, 0], [-1, 1], [0, 1]])
+    terms = []
+    for e in (0, 1):  # bistable grounding elements: F = 40 d (d + 0.5)(d - 0.5), damping 0.5 d'
+        terms += [{"element": e, "physics": "stiffness", "order": 1, "coefficient": -10.0},
+                  {"element": e, "physics": "stiffness", "order": 3, "coefficient": 40.0},
+                  {"element": e, "physics": "velocity_damping", "order": 1, "coefficient": 0.5}]
+    terms += [{"element": 2, "physics": "stiffness", "order": 1, "coefficient": 1.0},
+              {"element": 2, "physics": "velocity_damping", "order": 1, "coefficient": 0.1}]
+    model = g.from_terms([1.0, 1.0], terms, graph)
+    path = tmp_path / "lattice.json"
+    g.save_model(model, path)
+    out = tmp_path / "b"
+    code = main(["basins", str(path), "--f", "0.5:2:3", "--A", "1:40:3", "--load", "node:0",
+                 "--x-range=-1:1", "--settle-time", "30", "--out", str(out)])
+    assert code == 0, capsys.readouterr()
+    res = np.load(out / "basins.npz")
+    assert res["wells"].shape == (3, 3, 3) and res["counts"].shape == (3, 3)
+    assert set(np.unique(res["counts"]).tolist()) <= {-1, 0, 1, 2} and res["counts"].max() >= 1
+    assert (out / "basins.png").exists()
+    assert main(["basins", str(path), "--f", "1:2:2", "--A", "1:2:2", "--load", "node:2", "--x-range=-1:1",
+                 "--out", str(out)]) == 2
