@@ -100,7 +100,9 @@ def graph_posterior(stats, basis: Basis, n_designs: int, *, max_steps: int = 102
     order = np.tile(np.concatenate([np.arange(k) for k in basis.sizes]), n_designs)
     degrees = np.arange(1, basis.degree + 1)
     active = jnp.asarray(np.stack([np.where(fam == 0, order <= k, True) for k in degrees]).astype(float))
-    h, means, covs, log_ev, codes = jax.vmap(lambda a: _optimise(stats, basis, n_designs, a, max_steps))(active)
+    # one degree after another: a batch of LAPACK factorisations over the degrees can hang the CPU
+    # thread pool (`_fit/_householder.py`), and run apart they are no slower here
+    h, means, covs, log_ev, codes = jax.lax.map(lambda a: _optimise(stats, basis, n_designs, a, max_steps), active)
     weight = jax.nn.softmax(jnp.where(jnp.isfinite(log_ev), log_ev, -jnp.inf))
     best = jnp.argmax(weight)
     mean = means[best]
