@@ -1,11 +1,13 @@
 """Stable equilibria (wells) of each DOF of a model, for classifying final states."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._errors import GMRInputError
 from .._model._model import AbstractMechanicalModel, GlobalModel
+from .._topology import Graph
 
 
 def _check_range(x_range, d: int) -> np.ndarray:
@@ -93,10 +95,30 @@ def stable_wells(model: AbstractMechanicalModel, x_range=None, n: int = 20001) -
     return pad_wells(out)
 
 
-def configuration(model: AbstractMechanicalModel, wells, pattern, iterations: int = 40) -> np.ndarray:
+def _balance(model: AbstractMechanicalModel, u):
+    """The restoring forces at the coordinates u as the masses feel them: B' F(B u) on a `Graph`
+    (B the incidence), each cell's own F_i(u_i) on a chain or independent DOFs."""
+    topo = model.topology
+    f = model.restoring(topo.deformations(u))
+    return topo.node_forces(f) if isinstance(topo, Graph) else f
+
+
+@eqx.filter_jit
+def newton_equilibrium(model: AbstractMechanicalModel, u0):
+    """40 Newton steps on the force balance `_balance(model, u) = 0` from `u0`: the coordinates, the
+    balance's residual there and the eigenvalues of its Jacobian (the stiffness matrix: all
+    positive at a stable equilibrium)."""
+    def step(_, u):
+        return u - jnp.linalg.solve(jax.jacfwd(lambda z: _balance(model, z))(u), _balance(model, u))
+
+    u = jax.lax.fori_loop(0, 40, step, u0)
+    return u, _balance(model, u), jnp.linalg.eigvalsh(jax.jacfwd(lambda z: _balance(model, z))(u))
+
+
+def configuration(model: AbstractMechanicalModel, wells, pattern) -> np.ndarray:
     """The coordinates (node displacements on a `Graph`) of the stable equilibrium with cell
-    (element) e in its well `pattern[e]`: Newton on the force balance B' F_r(B u) = 0 from the
-    least-squares u with each multi-well element at that well.
+    (element) e in its well `pattern[e]`: `newton_equilibrium` from the least-squares u with each
+    multi-well element at that well.
 
     **Arguments:** `model`; `wells` (cells, max_wells) from `stable_wells`; `pattern` (cells,)
     well indices (ignored for one-well cells). Raises `GMRInputError` when Newton does not end
@@ -112,17 +134,7 @@ def configuration(model: AbstractMechanicalModel, wells, pattern, iterations: in
     d = model.n_dof
     B = np.asarray(topo.deformations(np.eye(d))).T  # (cells, dof)
     u0, *_ = np.linalg.lstsq(B[multi], target[multi], rcond=None)
-
-    def residual(u):
-        return jnp.asarray(B).T @ model.restoring(jnp.asarray(B) @ u)
-
-    @jax.jit
-    def newton(u):
-        step = lambda _, u: u - jnp.linalg.solve(jax.jacfwd(residual)(u), residual(u))  # noqa: E731
-        u = jax.lax.fori_loop(0, iterations, step, u)
-        return u, residual(u), jnp.linalg.eigvalsh(jax.jacfwd(residual)(u))
-
-    u, res, eig = (np.asarray(a) for a in newton(jnp.asarray(u0, float)))
+    u, res, eig = (np.asarray(a) for a in newton_equilibrium(model, jnp.asarray(u0, float)))
     cells = B @ u
     lo, hi = np.nanmin(w, axis=1), np.nanmax(w, axis=1)
     span = np.where(hi > lo, hi - lo, 1.0)

@@ -24,6 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._basins._wells import newton_equilibrium
 from .._model._model import AbstractMechanicalModel
 from .._recordings._noise import add_noise
 from .._recordings._recording import Recording
@@ -85,22 +86,10 @@ def truss_wells() -> np.ndarray:
     return stable_roots(ShallowArch(masses=jnp.ones(1), k=t["k"], w=t["w"], rise=t["rise"], p=t["p"]))
 
 
-@jax.jit
-def _newton(model: Lattice, u0):
-    def residual(u):
-        return model.topology.node_forces(model.restoring(model.topology.deformations(u)))
-
-    def step(_, u):
-        return u - jnp.linalg.solve(jax.jacfwd(residual)(u), residual(u))
-
-    u = jax.lax.fori_loop(0, 40, step, u0)
-    return u, residual(u), jnp.linalg.eigvalsh(jax.jacfwd(residual)(u))
-
-
 def stable_configuration(model: Lattice, u0) -> np.ndarray:
     """The equilibrium (node displacements) reached by Newton from u0; `ValueError` unless it is a
     stable equilibrium (force residual ~ 0, stiffness matrix positive definite)."""
-    u, res, eig = (np.asarray(a) for a in _newton(model, jnp.asarray(u0, float)))
+    u, res, eig = (np.asarray(a) for a in newton_equilibrium(model, jnp.asarray(u0, float)))
     scale = float(np.max(np.abs(model.restoring(model.topology.deformations(jnp.asarray(u0, float))))) + 1.0)
     if not (np.all(np.isfinite(u)) and np.max(np.abs(res)) < 1e-9 * scale and np.min(eig) > 0):
         raise ValueError(f"no stable equilibrium near the configuration (residual {np.max(np.abs(res)):.2e}, "
