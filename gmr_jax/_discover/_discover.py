@@ -30,7 +30,7 @@ from .._config import relieve_map_pressure
 from .._errors import GMRInputError
 from .._solution import RESULTS, Solution, code_name, message, raise_if_failed
 from .._fit._library import POSITION_DAMPING, VELOCITY_DAMPING
-from .._model._model import GlobalModel, coefficient_index, from_terms
+from .._model._model import GlobalModel, coefficient_index, coefficients, from_terms
 from .._recordings._derivatives import window_choice
 from .._recordings._recording import Recording, validate
 from .._simulate._free_run import SIM, sim_start
@@ -226,32 +226,36 @@ def _short_runs(model, recs, sims, always: bool = False) -> dict:
 ABSENT = 1e-9
 
 
-def absent(model: GlobalModel, term: Term, recs, force_rms: float | None = None) -> bool:
-    """Whether `term`'s force in `model` is below `ABSENT` x the RMS of the model's force on its DOF over `recs`
-    (`force_rms`, computed when not given)."""
-    x = np.concatenate([r.x[:, term.dof] for r in recs])
-    v = np.concatenate([r.v[:, term.dof] for r in recs])
-    if force_rms is None:
-        force_rms = float(np.sqrt(np.mean(np.concatenate([model_force(model, r.x, r.v)[:, term.dof] for r in recs]) ** 2)))
-    c = {(t["physics"], t["order"]): t["coefficient"] for t in model.terms() if t["dof"] == term.dof}
-    coef = c.get((term.family, term.order), 0.0) + (
-        c.get((POSITION_DAMPING, 0), 0.0) if (term.family, term.order) == (VELOCITY_DAMPING, 1) else 0.0)
-    part = coef * basis(term, x, v)
-    return bool(np.sqrt(np.mean(part**2)) < ABSENT * force_rms)
-
-
-def posterior_of(model: GlobalModel, dof: int, terms: list[Term]) -> np.ndarray | None:
-    """The covariance of the coefficients of `terms` (one DOF's basis functions) in the model's
-    `covariance` (a term's coefficient sums the model's entries of its basis function); None
-    when the model carries none."""
-    if model.covariance is None:
-        return None
+def _term_map(model: GlobalModel, dof: int, terms: list[Term]) -> np.ndarray:
+    """A (terms, p): each term's coefficient as the sum of the model's coefficients of its basis
+    function, in the layout of `coefficients(model)` / `GlobalModel.covariance` (x^0 v joins v)."""
     index = coefficient_index(model)
     A = np.zeros((len(terms), len(index)))
     for r, t in enumerate(terms):
         for c, (phys, order) in enumerate(index):
             A[r, c] = float(Term(dof, phys, order) == t or (
                 t.family == VELOCITY_DAMPING and t.order == 1 and phys == POSITION_DAMPING and order == 0))
+    return A
+
+
+def present_terms(model: GlobalModel, dof: int, recs) -> list[Term]:
+    """The model's terms of DOF `dof` (`model_terms`) whose force over `recs` is at least `ABSENT` x
+    the RMS of the model's force on that DOF: the re-calibration columns."""
+    terms = model_terms(model, dof)
+    x = np.concatenate([r.x[:, dof] for r in recs])
+    v = np.concatenate([r.v[:, dof] for r in recs])
+    full = np.concatenate([model_force(model, r.x, r.v)[:, dof] for r in recs])
+    coef = _term_map(model, dof, terms) @ np.asarray(coefficients(model), float)[dof]
+    floor = ABSENT * np.sqrt(np.mean(full**2))
+    return [t for t, c in zip(terms, coef) if np.sqrt(np.mean((c * basis(t, x, v)) ** 2)) >= floor]
+
+
+def posterior_of(model: GlobalModel, dof: int, terms: list[Term]) -> np.ndarray | None:
+    """The covariance of the coefficients of `terms` (one DOF's basis functions) in the model's
+    `covariance` (`_term_map`); None when the model carries none."""
+    if model.covariance is None:
+        return None
+    A = _term_map(model, dof, terms)
     cov = A @ np.asarray(model.covariance, float)[dof] @ A.T
     return cov if np.all(np.isfinite(cov)) else None
 
@@ -367,8 +371,7 @@ def discover(
     new_terms, mass_corr = [], np.zeros(d)
     series = {"resid_before": [], "resid_after": [], "x": [], "v": [], "t": []}
     for i in range(d):
-        f_rms = float(np.sqrt(np.mean(np.concatenate([model_force(model, r.x, r.v)[:, i] for r in recs]) ** 2)))
-        base = [t for t in model_terms(model, i) if not absent(model, t, recs, f_rms)]
+        base = present_terms(model, i, recs)
         cands = [t for t in catalogue if t.dof == i and t not in base
                  and not (t.family == "position_damping" and t.order == 0)
                  and not (unseen and t.family == "stiffness" and t.order == 0)]
