@@ -101,11 +101,15 @@ def _pulse(t, f, amp, t_off):
     return jnp.where(t <= t_off, amp * _half_period_sin(2 * jnp.pi * f * t), 0.0)
 
 
+def node_of(load: str) -> int | None:
+    """K of a load "node:K" (a force on mass K, K a whole number); None for any other string."""
+    head, _, k = load.partition(":")
+    return int(k) if head == "node" and k.isdigit() else None
+
+
 def load_node(load: str, d: int) -> int | None:
     """The mass (node) a half-sine force acts on: "tip" the last, "node:K" mass K; None for "base"."""
-    if load == "base":
-        return None
-    return d - 1 if load == "tip" else int(load.split(":")[1])
+    return d - 1 if load == "tip" else node_of(load)
 
 
 def half_sine_field(load: str, d: int):
@@ -151,9 +155,9 @@ def lanes_field(model, load: str, d: int, per_lane: bool):
     carry = jnp.asarray(np.eye(d, k=1) - eye)
     relative = jnp.asarray(eye - np.eye(d, k=-1))
     node = load_node(load, d)
-    tip_row = jnp.asarray(np.eye(d)[:, (d - 1 if node is None else node):][:, :1])  # (dof, 1): the loaded mass
-    base_row = jnp.asarray(np.eye(d)[:, :1]) if chain else jnp.ones((d, 1))
     loaded = d - 1 if node is None else node
+    tip_row = jnp.asarray(np.eye(d)[:, loaded:loaded + 1])  # (dof, 1): the loaded mass
+    base_row = jnp.asarray(np.eye(d)[:, :1]) if chain else jnp.ones((d, 1))
     load_rel = relative @ tip_row  # S e_K: the loaded mass's acceleration in the relative coordinates
 
     def horner(coef, z):

@@ -25,14 +25,9 @@ from .._simulate._simulate import has_coulomb
 from .._solution import RESULTS, Solution, as_result, code_name, error_if_failed, raise_if_failed, value_of
 from . import _native
 from ._joint import joint_final_states
-from ._lanes import SOLVERS as LANE_SOLVERS, as_solver, lanes_final_states
+from ._lanes import SOLVERS as LANE_SOLVERS, as_solver, lanes_final_states, node_of
 
 LOADS = ("tip", "base")
-
-
-def _is_node(load: str) -> bool:
-    head, _, k = load.partition(":")
-    return head == "node" and k.isdigit()
 BATCHINGS = ("auto", "native", "lanes", "joint", "member")
 SOLVERS = tuple(LANE_SOLVERS)
 PRECISIONS = {"float64": jnp.float64, "float32": jnp.float32}
@@ -102,7 +97,7 @@ class SweepSettings(eqx.Module):
 
     def __check_init__(self):
         # plain Python on concrete values; tracers (settings built inside jit) are not inspected
-        if not isinstance(self.load, str) or not (self.load in LOADS or _is_node(self.load)):
+        if not isinstance(self.load, str) or not (self.load in LOADS or node_of(self.load) is not None):
             raise GMRInputError(f"SweepSettings.load must be one of {LOADS} or 'node:K' (a force on mass K, from 0), "
                                 f"got {describe(self.load)}")
         if not isinstance(self.batching, str) or self.batching not in BATCHINGS:
@@ -318,7 +313,7 @@ def resolve_batching(model, settings: SweepSettings, devices) -> str:
     """The batching a sweep runs with ("auto" is "lanes"); "native" asked for where it cannot run
     is a `GMRInputError` naming why and the fix."""
     graph = isinstance(model.topology, Graph)
-    if settings.batching in ("joint", "member") and (graph or _is_node(settings.load)):
+    if settings.batching in ("joint", "member") and (graph or node_of(settings.load) is not None):
         raise GMRInputError(f"batching={settings.batching!r} sweeps chains and independent DOFs under a tip or base load; "
                             f"a {'Graph' if graph else 'node:K load'} sweeps on batching='lanes' (the default)")
     if settings.batching != "native":
@@ -406,7 +401,8 @@ def _check_inputs(model, f, A, wells, x0):
 
 
 def _check_load(settings: SweepSettings, d: int):
-    if _is_node(settings.load) and int(settings.load.split(":")[1]) >= d:
+    k = node_of(settings.load)
+    if k is not None and k >= d:
         raise GMRInputError(f"SweepSettings.load={settings.load!r}: this model has {d} masses (nodes 0..{d - 1})")
 
 

@@ -234,8 +234,9 @@ def _beyond_speed(model, model_path, wells, x0) -> str | None:
 
 def load_spec(text: str) -> str:
     """--load: tip, base or node:K."""
-    head, _, k = text.partition(":")
-    if text in ("tip", "base") or (head == "node" and k.isdigit()):
+    from .._basins._lanes import node_of
+
+    if text in ("tip", "base") or node_of(text) is not None:
         return text
     raise argparse.ArgumentTypeError(f"--load must be tip, base or node:K (K a mass index from 0), got {text!r}")
 
