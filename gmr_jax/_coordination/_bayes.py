@@ -42,31 +42,51 @@ from ._hermite import monomial_map
 TEST_POWER = 4
 
 
-def test_functions(width: int) -> np.ndarray:
-    """phi, phi', phi'' (3, width) on `width` samples of unit spacing, phi summing to 1.
-
-    The derivatives are corrected (least change) so that summation by parts is exact on
-    polynomials of degree <= 2 in the sample index: sum phi' n^k = -k sum phi n^(k-1),
-    sum phi'' n^k = k (k - 1) sum phi n^(k-2). A record's static offset and trend then cancel
-    exactly, whatever the width."""
-    s = -1.0 + (2.0 * np.arange(width) + 1.0) / width
-    half = width / 2.0  # ds/dt in samples
-    p = TEST_POWER
-    phi = (1.0 - s**2) ** p
-    d1 = -2.0 * p * s * (1.0 - s**2) ** (p - 1) / half
-    d2 = (-2.0 * p * (1.0 - s**2) ** (p - 1) + 4.0 * p * (p - 1) * s**2 * (1.0 - s**2) ** (p - 2)) / half**2
-    norm = phi.sum()
-    phi, d1, d2 = phi / norm, d1 / norm, d2 / norm
-    n = np.arange(width) - (width - 1) / 2.0
+def _exact(phi, d1, d2):
+    """Correct d1, d2 (least change) so that summation by parts against phi is exact on
+    polynomials of degree <= 2 in the sample index n: sum phi' n^k = -k sum phi n^(k-1),
+    sum phi'' n^k = k (k - 1) sum phi n^(k-2)."""
+    n = np.arange(phi.size) - (phi.size - 1) / 2.0
     V = np.stack([n**0, n, n**2], axis=1)
     m = [np.sum(phi * n**k) for k in range(3)]
 
     def exact(w, moments):
         return w + V @ np.linalg.solve(V.T @ V, np.asarray(moments) - V.T @ w)
 
-    d1 = exact(d1, [0.0, -m[0], -2.0 * m[1]])
-    d2 = exact(d2, [0.0, 0.0, 2.0 * m[0]])
-    return np.stack([phi, d1, d2])
+    return exact(d1, [0.0, -m[0], -2.0 * m[1]]), exact(d2, [0.0, 0.0, 2.0 * m[0]])
+
+
+def test_functions(width: int, count: int = 1) -> np.ndarray:
+    """`count` test functions on `width` samples of unit spacing: (3, width) phi, phi', phi''
+    for `count` = 1, else (count, 3, width).
+
+    The first is the bump phi(s) = (1 - s^2)^p, s in [-1, 1], summing to 1; with `count` > 1
+    the family spans phi(s) P_j(s), j < `count` (P_j Legendre polynomials), rotated so that
+    both sum_n psi_i psi_j and sum_n psi_i'' psi_j'' are diagonal: white noise in the force
+    (weighted by psi) and in the displacement (weighted by psi'') then leaves the rows of one
+    window uncorrelated, each with its own variance. Each has the energy of the first and
+    derivatives corrected by `_exact`, so a record's static offset and trend cancel exactly,
+    whatever the width."""
+    s = -1.0 + (2.0 * np.arange(width) + 1.0) / width
+    half = width / 2.0  # ds/dt in samples
+    p = TEST_POWER
+    bump = np.polynomial.Polynomial([1.0, 0.0, -1.0]) ** p
+    fams = []
+    for j in range(count):
+        f = bump * np.polynomial.Legendre.basis(j).convert(kind=np.polynomial.Polynomial)
+        fams.append([f(s), f.deriv(1)(s) / half, f.deriv(2)(s) / half**2])
+    fams = np.asarray(fams)  # (count, 3, width)
+    norm = fams[0, 0].sum()
+    fams = fams / norm
+    if count > 1:
+        import scipy.linalg
+
+        g0 = fams[:, 0] @ fams[:, 0].T
+        g2 = fams[:, 2] @ fams[:, 2].T
+        _, vec = scipy.linalg.eigh(g2, g0)  # vec' g0 vec = I, vec' g2 vec diagonal, smoothest first
+        fams = np.einsum("jk,jdn->kdn", vec, fams) * np.sqrt(np.sum(fams[0, 0] ** 2))
+    out = np.stack([np.stack([f[0], *_exact(*f)]) for f in fams])
+    return out[0] if count == 1 else out
 
 
 class Basis(eqx.Module):
@@ -119,30 +139,34 @@ def weak_rows(
     basis: Basis,
     width: int,
     dt,
+    tests: int = 1,
 ):
     """Weak-form rows of every record: the target y = p + s'' and the columns of the three
-    families, each integrated against phi on disjoint windows of `width` samples.
+    families, each integrated against the `tests` test functions of `test_functions` on
+    disjoint windows of `width` samples.
 
-    Returns `(rows (R, M, P), target (R, M), valid (R, M))`; a window is valid when every sample
-    in it is."""
-    phi, d1, d2 = (jnp.asarray(f) for f in test_functions(width))
+    Returns `(rows (R T, M, P), target (R T, M), valid (R T, M))`, record r's rows under test
+    function j at index r T + j; a window is valid when every sample in it is."""
+    tf = jnp.asarray(test_functions(width, tests)).reshape(tests, 3, width)
+    phi, d1, d2 = tf[:, 0], tf[:, 1], tf[:, 2]
     u = (x - centre) / half
     w = v / speed
     dtw = jnp.asarray(dt)
     xs_, ws_, ps_, ss_ = (_windows(a, width) for a in (u, w, p, s))
-    target = jnp.einsum("rmn,n->rm", ps_, phi) + jnp.einsum("rmn,n->rm", ss_, d2) / dtw**2
-    restoring = jnp.einsum("rmnk,n->rmk", _chebyshev(xs_, basis.degree), phi)
+    target = jnp.einsum("rmn,jn->rjm", ps_, phi) + jnp.einsum("rmn,jn->rjm", ss_, d2) / dtw**2
+    restoring = jnp.einsum("rmnk,jn->rjmk", _chebyshev(xs_, basis.degree), phi)
     d = basis.damping_order
     pw = jnp.stack([jnp.sign(ws_) * jnp.abs(ws_) ** j for j in range(d + 1)], axis=-1)
-    velocity = jnp.einsum("rmnj,n->rmj", pw, phi)
+    velocity = jnp.einsum("rmnk,jn->rjmk", pw, phi)
     # viscous and position damping as exact time derivatives: u^j w = (h / V) d/dt u^(j+1) / (j + 1)
     anti = jnp.stack([xs_ ** (j + 1) / (j + 1) for j in range(d + 1)], axis=-1)
-    exact = -jnp.einsum("rmnj,n->rmj", anti, d1) * (half / speed) / dtw
+    exact = -jnp.einsum("rmnk,jn->rjmk", anti, d1) * (half / speed) / dtw
     velocity = velocity.at[..., 1].set(exact[..., 0]) if d >= 1 else velocity
     position = exact[..., 1:]
     rows = jnp.concatenate([restoring, velocity, position], axis=-1)
-    valid = jnp.all(_windows(mask, width), axis=-1)
-    return rows, target, valid
+    valid = jnp.broadcast_to(jnp.all(_windows(mask, width), axis=-1)[:, None, :], target.shape)
+    flat = lambda a: a.reshape((-1,) + a.shape[2:])  # noqa: E731
+    return flat(rows), flat(target), flat(valid)
 
 
 def well_statistics(rows, target, valid, well: Int[Array, " records"], n_wells: int):

@@ -36,12 +36,15 @@ class ReconstructSettings(eqx.Module):
       DOF's spread of means are one well.
     - `width`: samples per test-function window; None: one period of the record's band edge
       (the frequency below which 99.5 % of the response's power lies above the noise floor).
+    - `tests`: test functions per window (a bump times Legendre polynomials, `_bayes.test_functions`);
+      each has its own noise variance per well.
     """
 
     degree: int = eqx.field(static=True, default=13)
     damping_order: int = eqx.field(static=True, default=3)
     well_tol: float = eqx.field(static=True, default=0.1)
     width: int | None = eqx.field(static=True, default=None)
+    tests: int = eqx.field(static=True, default=4)
 
 
 def balances(r, masses, topology) -> tuple[np.ndarray, np.ndarray]:
@@ -130,9 +133,11 @@ def _prepare(x, v, p, s, mask, well, n_wells, width, dt, settings):
     hi = jnp.max(jnp.where(mask, x, -jnp.inf))
     centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
     speed = jnp.max(jnp.abs(v) * m)
-    rows, target, valid = _bayes.weak_rows(x, v, p, s, mask, centre, half, speed, basis, width, dt)
+    t = settings.tests
+    rows, target, valid = _bayes.weak_rows(x, v, p, s, mask, centre, half, speed, basis, width, dt, t)
     scale = jnp.sqrt(jnp.sum(valid * target**2) / jnp.maximum(jnp.sum(valid), 1.0))
-    stats = _bayes.well_factors(rows, target / scale, valid, well, n_wells)
+    group = (well[:, None] * t + jnp.arange(t)[None, :]).reshape(-1)  # (well, test function)
+    stats = _bayes.well_factors(rows, target / scale, valid, group, n_wells * t)
     return basis, (centre, half, speed, scale), stats
 
 
@@ -186,7 +191,7 @@ def estimate(recs, masses, topology, settings: ReconstructSettings, wells, say, 
             "prior_scale": np.exp(np.asarray(h.log_scale)).tolist(),
             "prior_decay": np.asarray(jax.nn.sigmoid(h.logit_decay)).tolist(),
             "damping_prior_sd": np.exp(np.asarray(h.log_ard)).tolist(),
-            "noise_sd": np.exp(0.5 * np.asarray(h.log_noise)).tolist(),
+            "noise_sd": np.exp(0.5 * np.asarray(h.log_noise)).reshape(-1, len(groups), settings.tests).tolist(),
             "resolution": (np.abs(np.asarray(post.mean)) / np.maximum(sd, 1e-300)).tolist(),
         })
     maps = [np.asarray(_bayes.to_monomials(_basis(settings, len(wells[i][2])), *fits[i][0])) for i in range(d)]
