@@ -7,10 +7,11 @@ Per DOF, the force balance y(t) = F(x) + B(v) + C(x) v, with
 
 u = (x - x_c) / h (the records' span mapped to [-1, 1]), w = v / V (V: the largest recorded
 speed), Y the RMS of the rows' target, T_k Chebyshev polynomials. It is multiplied by test
-functions phi_m(t) = phi(t - t_m) on disjoint windows and integrated (the weak form): the
-inertia m x'' enters as m phi'' x, the position damping u^j w = d/dt [h u^(j+1) / ((j+1) V)]
-as -phi' times that, so neither needs a differentiated signal; rows from disjoint windows
-carry independent noise. Each well w has its own noise variance s_w^2.
+functions psi_j(t - t_m) on disjoint windows and integrated (the weak form): the inertia m x''
+enters as m psi'' x, the position damping u^j w = d/dt [h u^(j+1) / ((j+1) V)] as -psi' times
+that, so neither needs a differentiated signal; rows from disjoint windows carry independent
+noise, the test functions of one window are rotated to be uncorrelated under white noise in the
+force and in x. Each well w and test function j has its own noise variance s_wj^2.
 
 Prior: a_k ~ N(0, s_F^2 rho_F^(2 max(k - q, 0))) with q = 2W - 1 for W wells: a law with W
 stable wells has at least 2W - 1 zeros, so the orders up to q are all expected, and beyond them
@@ -330,6 +331,29 @@ def _minimise(loss, starts, args, max_steps: int):
     return y, RESULTS.where(flat, RESULTS.successful, code)
 
 
+def _inverse_2x2(H):
+    """The inverse of a symmetric 2 x 2 matrix with its eigenvalues raised to at least the
+    hyperprior's curvature (a direction where the evidence is flat or not concave gets the
+    hyperprior's variance)."""
+    a, b, c = H[0, 0], H[0, 1], H[1, 1]
+    mid, rad = 0.5 * (a + c), jnp.sqrt(0.25 * (a - c) ** 2 + b**2)
+    floor = 1.0 / max(HYPER_SD) ** 2
+    lam = jnp.maximum(jnp.stack([mid + rad, mid - rad]), floor)
+    angle = 0.5 * jnp.arctan2(2.0 * b, a - c)
+    V = jnp.array([[jnp.cos(angle), -jnp.sin(angle)], [jnp.sin(angle), jnp.cos(angle)]])
+    return (V / lam[None, :]) @ V.T
+
+
+def hyper_covariance(mean_of, loss_of, z):
+    """The mean's covariance from the uncertainty of the restoring law's scale and decay z
+    (Laplace): J S J' with J = d mean / dz and S the inverse Hessian of the negative log
+    posterior of z at its optimum, so that the band holds where the evidence cannot fix how
+    the law continues between and beyond the wells."""
+    z = jax.lax.stop_gradient(z)
+    J = jax.jacfwd(mean_of)(z)
+    return J @ _inverse_2x2(jax.hessian(loss_of)(z)) @ J.T
+
+
 def _optimise(stats, basis: Basis, active, max_steps: int):
     def loss(h, args):
         return -(log_evidence(h, args, basis, active) + log_hyperprior(h)) / jnp.maximum(jnp.sum(args[1]), 1.0)
@@ -337,7 +361,14 @@ def _optimise(stats, basis: Basis, active, max_steps: int):
     # two starts: the evidence can have a local optimum at either end
     h, code = _minimise(loss, [_initial(stats, basis, decay) for decay in (0.3, 0.7)], stats, max_steps)
     mean, chol, sq, log_ev = _solve(h, stats, basis, active)
-    return h, mean, _covariance(chol, sq), log_ev + log_hyperprior(h), code._value
+
+    def at(z):
+        return eqx.tree_at(lambda q: (q.log_scale, q.logit_decay), jax.lax.stop_gradient(h), (z[0], z[1]))
+
+    extra = hyper_covariance(lambda z: _solve(at(z), stats, basis, active)[0],
+                             lambda z: -(log_evidence(at(z), stats, basis, active) + log_hyperprior(at(z))),
+                             jnp.stack([h.log_scale, h.logit_decay]))
+    return h, mean, _covariance(chol, sq) + extra, log_ev + log_hyperprior(h), code._value
 
 
 def posterior(stats, basis: Basis, *, max_steps: int = 1024, throw: bool = True) -> Solution:
@@ -358,7 +389,7 @@ def posterior(stats, basis: Basis, *, max_steps: int = 1024, throw: bool = True)
     order = np.concatenate([np.arange(n) for n in basis.sizes])
     degrees = np.arange(1, basis.degree + 1)
     active = jnp.asarray(np.stack([np.where(fam == 0, order <= k, True) for k in degrees]).astype(float))
-    h, means, covs, log_ev, codes = jax.vmap(lambda a: _optimise(stats, basis, a, max_steps))(active)
+    h, means, covs, log_ev, codes = jax.lax.map(lambda a: _optimise(stats, basis, a, max_steps), active)
     weight = jax.nn.softmax(jnp.where(jnp.isfinite(log_ev), log_ev, -jnp.inf))
     mean = jnp.einsum("k,ki->i", weight, means)
     dev = means - mean[None, :]
@@ -472,7 +503,15 @@ def design_posterior(stats, maps, damping_sd, log_noise, basis: Basis, *, max_st
     starts = [Design(jnp.zeros(()), jnp.asarray(-1.0), jnp.full(j, t), jnp.full(j, -1.0), log_noise) for t in (-6.0, 0.0)]
     d, code = _minimise(loss, starts, stats, max_steps)  # two starts: the members one design, or each its own
     E, mean, chol, sq, _ = _design_solve(d, stats, maps, damping_sd, basis)
-    cz = _covariance(chol, sq)
+
+    def at(z):
+        return eqx.tree_at(lambda q: (q.log_scale, q.logit_decay), jax.lax.stop_gradient(d), (z[0], z[1]))
+
+    def loss_of(z):
+        return -(_design_solve(at(z), stats, maps, damping_sd, basis)[4] + _log_design_prior(at(z)))
+
+    cz = _covariance(chol, sq) + hyper_covariance(lambda z: _design_solve(at(z), stats, maps, damping_sd, basis)[1],
+                                                  loss_of, jnp.stack([d.log_scale, d.logit_decay]))
     means = jnp.einsum("jpz,z->jp", E, mean)
     covs = jnp.einsum("jpz,zy,jqy->jpq", E, cz, E)
     code = RESULTS.where(jnp.all(jnp.isfinite(means)), code, RESULTS.nonfinite)
