@@ -153,3 +153,46 @@ def test_cells_share_a_law_only_when_labelled_one_design():
         _fit(recs, designs=[0, 0, 0])
     with pytest.raises(gmr.GMRInputError, match="evidence"):
         gmr.reconstruct(recs, coordination="gls", designs=[0, 0])
+
+
+def test_test_functions_of_one_window_are_uncorrelated():
+    from gmr_jax._coordination._bayes import test_functions
+
+    tf = test_functions(60, 4)
+    for k in (0, 2):  # white noise in the force (psi) and in x (psi'')
+        gram = tf[:, k] @ tf[:, k].T
+        sd = np.sqrt(np.diag(gram))
+        np.testing.assert_allclose(gram / np.outer(sd, sd), np.eye(4), atol=1e-3)  # correlations
+    n = np.arange(60) - 29.5
+    for psi, d1, d2 in tf:  # summation by parts exact on a constant offset and a trend
+        np.testing.assert_allclose([d1 @ n**0, d2 @ n**0, d2 @ n], 0.0, atol=1e-12)
+        np.testing.assert_allclose(d1 @ n, -psi.sum(), atol=1e-12)
+
+
+def _steady_tones(system, snr_db, seed=0, fs=100.0, settle=60.0, duration=60.0, amplitude=0.03):
+    """The steady response to one base sine per well at 0.8 x the well's natural frequency."""
+    ts = jnp.arange(int((settle + duration) * fs) + 1) / fs
+    keep = np.asarray(ts) >= settle
+    rng = np.random.default_rng(seed)
+    recs = []
+    for i, e in enumerate(system.equilibria[:, 0]):
+        k = float(jax.grad(lambda x: system.truth.restoring(jnp.atleast_1d(x))[0])(e))
+        exc = gmr.BaseSine(jnp.asarray(amplitude), 0.8 * np.sqrt(k) / (2 * np.pi))
+        xs, vs = gmr.simulate(system.truth, exc, ts, system.equilibria[i]).value
+        base = jax.vmap(lambda t: exc(t)[0])(ts)
+        xdd = jax.vmap(lambda x, v, b: system.truth.accelerations(x, v, b, jnp.zeros(1)))(xs, vs, base)
+        a = system.truth.absolute_accelerations(xdd, base)
+        sig = [gmr.add_noise(np.asarray(z)[keep], snr_db, rng) for z in (xs, vs, a, base)]
+        recs.append(gmr.Recording(t=np.asarray(ts)[keep] - settle, x=sig[0], v=sig[1], a=sig[2], base_acc=sig[3],
+                                  masses=np.ones(1), name=f"tone{i}"))
+    return recs
+
+
+def test_a_steady_tone_per_well_fixes_the_curvature_between_the_wells():
+    # one bump per window averages a steady tone's harmonics away (about 20 % off here)
+    arch = gmr.systems.shallow_arch()
+    sol = _fit(_steady_tones(arch, 50.0))
+    assert gmr.metrics.restoring_error(sol.value, arch.truth, 0, arch.x_range[0]) < 0.05
+    eq = arch.equilibria[:, 0]
+    band = gmr.metrics.band_coverage(sol.value, arch.truth, 0, (eq.min(), eq.max()), n=101, level=0.95)
+    assert band.share >= 0.9
