@@ -32,6 +32,7 @@ CROSS = dict(amplitude=0.5, frequency=0.5, duration=120.0)
 CASES = (("x", 50), ("x", 30), ("v", 50), ("v", 30), ("xva", 50))
 METHODS = {
     "default": lambda r: gj.reconstruct(r, throw=False),
+    "default, 4 test functions": lambda r: gj.reconstruct(r, settings=gj.ReconstructSettings(tests=4), throw=False),
     "paper gls": lambda r: gj.reconstruct(r, coordination="gls", throw=False),
     "paper hermite": lambda r: gj.reconstruct(r, coordination="hermite", throw=False),
     "GMC-SINDy": lambda r: gj.gmc_sindy(r, throw=False),
@@ -221,14 +222,14 @@ def main():
                     model, n_warn = sol.value, len(sol.stats["warnings"])
                     st = sol.stats["dofs"][0].stats if sol.stats["dofs"] else {}
                 err, nrmse, rate, div, nrmse_m = evaluate(model, cross, measured)
-                draws = drawn_rates(model, cross, seed) if name == "default" and model.covariance is not None else None
+                draws = drawn_rates(model, cross, seed) if name.startswith("default") and model.covariance is not None else None
                 k = np.trim_zeros(np.asarray(model.stiffness[0]), "b").size - 1
                 rows.append((sensing, snr, seed, name, dict(err=err, nrmse=nrmse, rate=rate, diverged=div, K=k,
                                                              nrmse_measured=nrmse_m, truth_measured=truth_nrmse,
                                                              route=st.get("coordination", "-"), warnings=n_warn,
                                                              amp=amp, draws=draws, secs=time.time() - t0), ""))
                 r = rows[-1][4]
-                print(f"{sensing:3s} {snr} dB seed {seed} {name:13s} restoring {100 * r['err']:7.2f} %  1-period "
+                print(f"{sensing:3s} {snr} dB seed {seed} {name:26s} restoring {100 * r['err']:7.2f} %  1-period "
                       f"NRMSE {100 * r['nrmse']:8.2f} %  on the measured record {100 * nrmse_m:.2f} % (truth "
                       f"{100 * truth_nrmse:.2f} %)  hops/s {r['rate']:.3f} (truth {true_rate:.3f})  K {k}  "
                       f"{r['route']}  warnings {r['warnings']}", flush=True)

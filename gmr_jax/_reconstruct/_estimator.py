@@ -36,15 +36,17 @@ class ReconstructSettings(eqx.Module):
       DOF's spread of means are one well.
     - `width`: samples per test-function window; None: one period of the record's band edge
       (the frequency below which 99.5 % of the response's power lies above the noise floor).
-    - `tests`: test functions per window (a bump times Legendre polynomials, `_bayes.test_functions`);
-      each has its own noise variance per well.
+    - `tests`: test functions per window (a bump times Legendre polynomials, `_bayes.test_functions`),
+      each with its own noise variance per well. One keeps a window's mean balance; more keep the
+      shape of the motion inside it (a steady tone's harmonics) but let noise in x and v into the
+      regressors at higher frequencies.
     """
 
     degree: int = eqx.field(static=True, default=13)
     damping_order: int = eqx.field(static=True, default=3)
     well_tol: float = eqx.field(static=True, default=0.1)
     width: int | None = eqx.field(static=True, default=None)
-    tests: int = eqx.field(static=True, default=4)
+    tests: int = eqx.field(static=True, default=1)
 
 
 def balances(r, masses, topology) -> tuple[np.ndarray, np.ndarray]:
