@@ -43,7 +43,7 @@ class ReconstructSettings(eqx.Module):
     """
 
     degree: int = eqx.field(static=True, default=13)
-    damping_order: int = eqx.field(static=True, default=3)
+    damping_order: int = eqx.field(static=True, default=5)
     well_tol: float = eqx.field(static=True, default=0.1)
     width: int | None = eqx.field(static=True, default=None)
     tests: int = eqx.field(static=True, default=1)
