@@ -291,8 +291,6 @@ def test_coverage_study_cases_meet_the_target(index):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the band holds the truth on 89 % of the span between the three wells "
-                   "(target 90 %)")
 def test_the_band_holds_an_odd_error_between_three_wells():
     """A non-polynomial tri-stable law (audit: F = k x + s sin(w x) + e x^2, wells -9.3 / 0 / 9.1 mm, x, v, a at
     40 dB): the degree-9 polynomial's error between the wells is odd (its next even degree does not hold it), and
