@@ -153,6 +153,8 @@ def test_cells_share_a_law_only_when_labelled_one_design():
         _fit(recs, designs=[0, 0, 0])
     with pytest.raises(gmr.GMRInputError, match="evidence"):
         gmr.reconstruct(recs, coordination="gls", designs=[0, 0])
+    with pytest.raises(gmr.GMRInputError, match="damping_order"):  # two settings of one option
+        gmr.reconstruct(recs, gmr.Library(5, 2), settings=gmr.ReconstructSettings(tests=4))
 
 
 def test_test_functions_of_one_window_are_uncorrelated():

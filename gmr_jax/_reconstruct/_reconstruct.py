@@ -271,6 +271,11 @@ def reconstruct(
         raise GMRInputError(f"coordination must be one of {', '.join(map(repr, ROUTES))}, got {coordination!r}")
     if settings is None:
         settings = ReconstructSettings(damping_order=library.damping_order)
+    elif coordination == "evidence" and library != Library(5, 5) and library.damping_order != settings.damping_order:
+        raise GMRInputError(
+            f"library.damping_order ({library.damping_order}) and settings.damping_order ({settings.damping_order}) "
+            f"disagree; the evidence route reads settings: pass ReconstructSettings(damping_order="
+            f"{library.damping_order}, ...) and leave library out")
     if isinstance(topology, Graph):
         return _graph(recordings, topology, designs, coordination, settings, masses, throw, progress)
     relieve_map_pressure()  # a long session's compiled programs (`_config.map_pressure`)
