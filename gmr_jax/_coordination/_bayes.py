@@ -58,8 +58,8 @@ def _exact(phi, d1, d2):
 
 
 def test_functions(width: int, count: int = 1) -> np.ndarray:
-    """`count` test functions on `width` samples of unit spacing: (3, width) phi, phi', phi''
-    for `count` = 1, else (count, 3, width).
+    """`count` test functions on `width` samples of unit spacing: (count, 3, width), each
+    psi, psi', psi''.
 
     The first is the bump phi(s) = (1 - s^2)^p, s in [-1, 1], summing to 1; with `count` > 1
     the family spans phi(s) P_j(s), j < `count` (P_j Legendre polynomials), rotated so that
@@ -86,8 +86,7 @@ def test_functions(width: int, count: int = 1) -> np.ndarray:
         g2 = fams[:, 2] @ fams[:, 2].T
         _, vec = scipy.linalg.eigh(g2, g0)  # vec' g0 vec = I, vec' g2 vec diagonal, smoothest first
         fams = np.einsum("jk,jdn->kdn", vec, fams) * np.sqrt(np.sum(fams[0, 0] ** 2))
-    out = np.stack([np.stack([f[0], *_exact(*f)]) for f in fams])
-    return out[0] if count == 1 else out
+    return np.stack([np.stack([f[0], *_exact(*f)]) for f in fams])
 
 
 class Basis(eqx.Module):
@@ -148,7 +147,7 @@ def weak_rows(
 
     Returns `(rows (R T, M, P), target (R T, M), valid (R T, M))`, record r's rows under test
     function j at index r T + j; a window is valid when every sample in it is."""
-    tf = jnp.asarray(test_functions(width, tests)).reshape(tests, 3, width)
+    tf = jnp.asarray(test_functions(width, tests))
     phi, d1, d2 = tf[:, 0], tf[:, 1], tf[:, 2]
     u = (x - centre) / half
     w = v / speed
@@ -344,14 +343,20 @@ def _inverse_2x2(H):
     return (V / lam[None, :]) @ V.T
 
 
-def hyper_covariance(mean_of, loss_of, z):
-    """The mean's covariance from the uncertainty of the restoring law's scale and decay z
-    (Laplace): J S J' with J = d mean / dz and S the inverse Hessian of the negative log
-    posterior of z at its optimum, so that the band holds where the evidence cannot fix how
-    the law continues between and beyond the wells."""
-    z = jax.lax.stop_gradient(z)
-    J = jax.jacfwd(mean_of)(z)
-    return J @ _inverse_2x2(jax.hessian(loss_of)(z)) @ J.T
+def hyper_covariance(h, mean_of, loss_of):
+    """The mean's covariance from the uncertainty of the restoring law's scale and decay
+    z = (`h.log_scale`, `h.logit_decay`) (Laplace): J S J' with J = d mean / dz and S the inverse
+    Hessian of the negative log posterior of z at its optimum `h`, so that the band holds where
+    the evidence cannot fix how the law continues between and beyond the wells. `mean_of` and
+    `loss_of` take hyperparameters like `h` (a `Hyper` or a `Design`)."""
+    h = jax.lax.stop_gradient(h)
+
+    def at(z):
+        return eqx.tree_at(lambda q: (q.log_scale, q.logit_decay), h, (z[0], z[1]))
+
+    z = jnp.stack([h.log_scale, h.logit_decay])
+    J = jax.jacfwd(lambda q: mean_of(at(q)))(z)
+    return J @ _inverse_2x2(jax.hessian(lambda q: loss_of(at(q)))(z)) @ J.T
 
 
 def _optimise(stats, basis: Basis, active, max_steps: int):
@@ -361,13 +366,8 @@ def _optimise(stats, basis: Basis, active, max_steps: int):
     # two starts: the evidence can have a local optimum at either end
     h, code = _minimise(loss, [_initial(stats, basis, decay) for decay in (0.3, 0.7)], stats, max_steps)
     mean, chol, sq, log_ev = _solve(h, stats, basis, active)
-
-    def at(z):
-        return eqx.tree_at(lambda q: (q.log_scale, q.logit_decay), jax.lax.stop_gradient(h), (z[0], z[1]))
-
-    extra = hyper_covariance(lambda z: _solve(at(z), stats, basis, active)[0],
-                             lambda z: -(log_evidence(at(z), stats, basis, active) + log_hyperprior(at(z))),
-                             jnp.stack([h.log_scale, h.logit_decay]))
+    extra = hyper_covariance(h, lambda q: _solve(q, stats, basis, active)[0],
+                             lambda q: -(log_evidence(q, stats, basis, active) + log_hyperprior(q)))
     return h, mean, _covariance(chol, sq) + extra, log_ev + log_hyperprior(h), code._value
 
 
@@ -503,15 +503,9 @@ def design_posterior(stats, maps, damping_sd, log_noise, basis: Basis, *, max_st
     starts = [Design(jnp.zeros(()), jnp.asarray(-1.0), jnp.full(j, t), jnp.full(j, -1.0), log_noise) for t in (-6.0, 0.0)]
     d, code = _minimise(loss, starts, stats, max_steps)  # two starts: the members one design, or each its own
     E, mean, chol, sq, _ = _design_solve(d, stats, maps, damping_sd, basis)
-
-    def at(z):
-        return eqx.tree_at(lambda q: (q.log_scale, q.logit_decay), jax.lax.stop_gradient(d), (z[0], z[1]))
-
-    def loss_of(z):
-        return -(_design_solve(at(z), stats, maps, damping_sd, basis)[4] + _log_design_prior(at(z)))
-
-    cz = _covariance(chol, sq) + hyper_covariance(lambda z: _design_solve(at(z), stats, maps, damping_sd, basis)[1],
-                                                  loss_of, jnp.stack([d.log_scale, d.logit_decay]))
+    cz = _covariance(chol, sq) + hyper_covariance(
+        d, lambda q: _design_solve(q, stats, maps, damping_sd, basis)[1],
+        lambda q: -(_design_solve(q, stats, maps, damping_sd, basis)[4] + _log_design_prior(q)))
     means = jnp.einsum("jpz,z->jp", E, mean)
     covs = jnp.einsum("jpz,zy,jqy->jpq", E, cz, E)
     code = RESULTS.where(jnp.all(jnp.isfinite(means)), code, RESULTS.nonfinite)

@@ -70,7 +70,7 @@ def graph_arrays(
     r_, d_ = p.shape[:2]
     node_rows = jnp.einsum("ed,eg,ermp->rdmgp", incidence, design, rows)
     node_rows = node_rows.reshape(r_ * d_, rows.shape[2], n_designs * basis.n)
-    phi, _, d2 = (jnp.asarray(f) for f in _bayes.test_functions(width))
+    phi, _, d2 = (jnp.asarray(f) for f in _bayes.test_functions(width)[0])
     win = lambda a: _bayes._windows(a, width)  # noqa: E731
     target = (jnp.einsum("rdmn,n->rdm", win(p), phi) + jnp.einsum("rdmn,n->rdm", win(s), d2) / dt**2)
     valid = jnp.all(win(mask), axis=-1)  # (R, M)

@@ -40,6 +40,8 @@ from ._sanity import GMRDataWarning
 
 #: Default STLS for the physics fits: pysindy semantics, normalised columns, no ridge.
 DEFAULT_SOLVER = STLS(threshold=0.1, alpha=0.0, normalize_columns=True, unbias=True)
+#: Default library: restoring and damping orders 5 (the evidence route reads its damping order without `settings`).
+DEFAULT_LIBRARY = Library(5, 5)
 
 #: the global step: one posterior of all wells' records, or the paper's coordination of local fits
 ROUTES = ("evidence", "hermite", "gls")
@@ -222,7 +224,7 @@ def training_scores(model: GlobalModel, recs, masses, topology) -> dict:
 
 def reconstruct(
     recordings: list[Recording],
-    library: Library = Library(5, 5),
+    library: Library = DEFAULT_LIBRARY,
     solver: STLS = DEFAULT_SOLVER,
     select: AutoThreshold | None = AutoThreshold(),
     *,
@@ -271,7 +273,7 @@ def reconstruct(
         raise GMRInputError(f"coordination must be one of {', '.join(map(repr, ROUTES))}, got {coordination!r}")
     if settings is None:
         settings = ReconstructSettings(damping_order=library.damping_order)
-    elif coordination == "evidence" and library != Library(5, 5) and library.damping_order != settings.damping_order:
+    elif coordination == "evidence" and library != DEFAULT_LIBRARY and library.damping_order != settings.damping_order:
         raise GMRInputError(
             f"library.damping_order ({library.damping_order}) and settings.damping_order ({settings.damping_order}) "
             f"disagree; the evidence route reads settings: pass ReconstructSettings(damping_order="
