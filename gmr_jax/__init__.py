@@ -82,12 +82,14 @@ from ._simulate._inputs import (
     BaseChirp as BaseChirp,
     BaseSine as BaseSine,
     HalfSineBase as HalfSineBase,
+    HalfSineNodes as HalfSineNodes,
     HalfSineTip as HalfSineTip,
     NoInput as NoInput,
     Sampled as Sampled,
 )
 from ._simulate._integrate import Integrator as Integrator
 from ._simulate._free_run import FreeRun as FreeRun, free_run as free_run
+from ._simulate._front import TransitionFront as TransitionFront, transition_front as transition_front
 from ._simulate._simulate import simulate as simulate
 
 # basins of deployment (Fig. 11)

@@ -1,4 +1,4 @@
-"""Reconstruction of lattices of bistable elements on a graph (2 x 8 ladder, 4 x 4 grid).
+"""Reconstruction of lattices of bistable elements on a graph (2 x 8 ladders, serial and grounded; 4 x 4 grid).
 
 Each case: `gmr.systems.make_recordings` around the system's four configurations (every bistable
 element at each of its wells), white noise at SNR on every channel (x, v, a and the node forces),
@@ -112,10 +112,11 @@ def main():
     args = ap.parse_args()
     fracs = (0.02,) if args.quick else (0.005, 0.01, 0.02, 0.03)
     rows = []
-    ladder, grid = gmr.systems.ladder(), gmr.systems.grid()
+    ladder, grid, grounded = gmr.systems.ladder(), gmr.systems.grid(), gmr.systems.grounded_ladder()
     plan = [(ladder, f, 50.0, 1, False) for f in fracs] + [(ladder, 0.02, 60.0, 1, False),
                                                            (ladder, 0.02, 50.0, 1, True),
                                                            (grid, 0.02, 50.0, 1, False)]
+    plan += [(grounded, f, 50.0, 1, False) for f in (fracs if args.quick else (0.005, 0.02, 0.03))]
     for system, frac, snr, seed, clean_x in plan:
         row = case(system, frac, snr, seed, clean_x)
         print(row, flush=True)

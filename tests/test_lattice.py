@@ -8,7 +8,7 @@ import pytest
 import gmr_jax as gmr
 
 
-@pytest.fixture(scope="module", params=["ladder", "grid"])
+@pytest.fixture(scope="module", params=["ladder", "grid", "grounded_ladder"])
 def system(request):
     return getattr(gmr.systems, request.param)()
 
@@ -57,3 +57,72 @@ def test_lattice_recordings_follow_the_contract(system):
         vib = np.asarray(system.truth.topology.deformations(rec.x)) - np.asarray(system.truth.topology.deformations(eq))
         amplitude = np.sqrt(2.0) * vib.std(axis=0).max()
         assert 0.005 * span < amplitude < 0.06 * span
+
+
+def test_a_lattice_refuses_couplings_that_do_not_hold_its_recorded_patterns():
+    with pytest.raises(ValueError, match="do not hold the recorded patterns"):
+        gmr.systems.grounded_ladder(coupler=6.0, rung=6.0)
+
+
+def _ladder_ends(model, system):
+    wells = gmr.stable_wells(model, system.x_range)
+    two = np.sum(np.isfinite(wells), axis=1) > 1
+    return gmr.configuration(model, wells, np.where(two, 1, 0)), gmr.configuration(model, wells, np.zeros(len(wells), int))
+
+
+@pytest.fixture(scope="module")
+def grounded():
+    system = gmr.systems.grounded_ladder()
+    n = system.truth.topology.nodes // 2
+    levels = np.full(system.truth.topology.n_elements, -1)
+    levels[: 2 * n] = np.tile(np.arange(n), 2)
+    return system, n, levels
+
+
+def test_a_pull_on_the_grounded_ladder_runs_a_front_or_is_pinned(grounded):
+    system, n, levels = grounded
+    truth = system.truth
+    start, target = _ladder_ends(truth, system)
+    weak, strong = (gmr.transition_front(truth, start, target, gmr.HalfSineNodes(1.0, -a, (0, n), n_dof=2 * n), 40.0,
+                                         levels) for a in (3.0, 20.0))
+    assert not bool(weak.propagated) and int(weak.reached) == -1 and np.isnan(float(weak.speed))
+    assert np.allclose(np.asarray(weak.x)[-1], start, atol=0.05)  # back in the start configuration
+    assert bool(strong.propagated) and int(strong.reached) == n - 1
+    times = np.asarray(strong.times)
+    assert np.all(np.isnan(times[2 * n:]))  # couplers and rungs are not watched
+    rail = times[:n]
+    assert np.all(np.diff(rail) > 0)  # level after level
+    assert np.allclose(times[:n], times[n:2 * n], atol=0.05)  # the rails move together
+    spacing = np.median(np.diff(rail[1:-1]))
+    assert float(strong.speed) == pytest.approx(1.0 / spacing, rel=0.02)
+    assert np.allclose(np.asarray(strong.x)[-1], target, atol=0.1)
+
+
+def test_transition_front_refuses_bad_arguments(grounded):
+    system, n, levels = grounded
+    truth = system.truth
+    start, target = _ladder_ends(truth, system)
+    load = gmr.HalfSineNodes(1.0, -10.0, (0, n), n_dof=2 * n)
+    with pytest.raises(gmr.GMRInputError, match="levels"):
+        gmr.transition_front(truth, start, target, load, 10.0, levels[:5])
+    with pytest.raises(gmr.GMRInputError, match="shape"):
+        gmr.transition_front(truth, start[:3], target, load, 10.0, levels)
+    with pytest.raises(gmr.GMRInputError, match="nothing to cross"):
+        gmr.transition_front(truth, start, start, load, 10.0, levels)
+    with pytest.raises(ValueError, match="mass indices"):
+        gmr.HalfSineNodes(1.0, 1.0, (0, 2 * n), n_dof=2 * n)
+
+
+@pytest.mark.slow
+def test_a_model_from_small_vibrations_runs_the_truths_fronts(grounded):
+    system, n, levels = grounded
+    truth, graph = system.truth, system.truth.topology
+    span = float(np.diff(gmr.stable_wells(truth, system.x_range)[0])[0])
+    recs = gmr.systems.make_recordings(system, 0.02 * span, snr_db=50.0, seed=3)
+    model = gmr.reconstruct(recs, topology=graph, designs=system.designs).value
+    for a in (4.0, 10.0, 25.0):
+        ft, fm = (gmr.transition_front(m, *_ladder_ends(m, system), gmr.HalfSineNodes(1.0, -a, (0, n), n_dof=2 * n),
+                                       40.0, levels) for m in (truth, model))
+        assert bool(ft.propagated) == bool(fm.propagated), a
+        if bool(ft.propagated):
+            assert float(fm.speed) == pytest.approx(float(ft.speed), rel=0.05)

@@ -11,18 +11,17 @@ The prior is `_bayes`'s per design (a scale and a geometric decay per family and
 (record, node) has its own noise variance. The hyperparameters maximise the evidence, for each
 restoring degree K = 1..`degree` (one K for every design), and the degrees are weighted by
 p(K | rows): the mean of the most probable K, the mixture's covariance about it, as `_bayes`.
-`_solve` and `_optimise` are `_bayes`'s with the prior's scales and decays per design.
+`_solve` is `_bayes`'s with the prior's scales and decays per design; the optimiser is `_bayes._minimise`.
 """
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array, Float
 
 from .._solution import RESULTS, Solution, as_result
-from ._bayes import _ADJOINT, OFF, Basis
+from ._bayes import OFF, Basis, _minimise
 
 
 class GraphHyper(eqx.Module):
@@ -79,14 +78,7 @@ def _optimise(stats, basis: Basis, n_designs: int, active, max_steps: int):
     def loss(h, args):
         return -_solve(h, args, basis, active)[3] / jnp.maximum(jnp.sum(args[3]), 1.0)
 
-    solver = optx.BFGS(rtol=1e-7, atol=1e-7)
-    sols = [optx.minimise(loss, solver, _initial(stats, n_designs, decay), args=stats, max_steps=max_steps,
-                          throw=False, adjoint=_ADJOINT)
-            for decay in (0.3, 0.7)]
-    vals = [loss(sl.value, stats) for sl in sols]
-    better = vals[1] < vals[0]
-    h = jax.tree_util.tree_map(lambda a, b_: jnp.where(better, a, b_), sols[1].value, sols[0].value)
-    code = RESULTS.where(better, RESULTS.promote(sols[1].result), RESULTS.promote(sols[0].result))
+    h, code = _minimise(loss, [_initial(stats, n_designs, decay) for decay in (0.3, 0.7)], stats, max_steps)
     mean, chol, sq, log_ev = _solve(h, stats, basis, active)
     inv = jax.scipy.linalg.cho_solve((chol, True), jnp.eye(sq.shape[0]))
     return h, mean, sq[:, None] * inv * sq[None, :], log_ev, code._value

@@ -84,6 +84,28 @@ class HalfSineTip(AbstractInput):
         return jnp.reshape(0.5 / jnp.asarray(self.frequency, float), (1,))
 
 
+class HalfSineNodes(AbstractInput):
+    """Eq. (25) on chosen masses: the force A sin(2π f t) for t <= 1/(2f), then 0, on each mass
+    in `nodes` (e.g. the first level of a lattice, to start a transition front)."""
+
+    frequency: Float[Array, ""] | float
+    amplitude: Float[Array, ""] | float
+    nodes: tuple[int, ...] = eqx.field(static=True, converter=lambda k: tuple(int(i) for i in k))
+    n_dof: int = eqx.field(static=True, default=1)
+
+    def __check_init__(self):
+        if not self.nodes or min(self.nodes) < 0 or max(self.nodes) >= self.n_dof:
+            raise ValueError(f"nodes must be mass indices in 0..{self.n_dof - 1}, got {self.nodes}")
+
+    def __call__(self, t):
+        on = t <= 0.5 / self.frequency
+        f = jnp.where(on, self.amplitude * jnp.sin(2 * jnp.pi * self.frequency * t), 0.0)
+        return jnp.zeros(()), jnp.zeros(self.n_dof).at[jnp.asarray(self.nodes)].set(f)
+
+    def jump_times(self):
+        return jnp.reshape(0.5 / jnp.asarray(self.frequency, float), (1,))
+
+
 class HalfSineBase(AbstractInput):
     """Base-excitation variant of Eq. (25): base acceleration A sin(2π f t) for t <= 1/(2f),
     then 0 (A in m/s²; the base is then left moving at constant velocity, which a chain of

@@ -1,6 +1,6 @@
 """Built-in systems that make data: the paper's single-DOF cases, Kresling truss chains and
 non-polynomial single-DOF bistables (a shallow arch, a magnetic oscillator), lattices of
-bistable elements on a graph (a ladder, a grid).
+bistable elements on a graph (a ladder, a grid, a grounded ladder that carries transition waves).
 
 Each factory returns a `System` (truth model, stable equilibria, how it is excited, the
 phase-plane box where errors are measured); `make_recordings` simulates base-sweep recordings
@@ -19,7 +19,7 @@ from ._kresling import (
     kresling5 as kresling5,
     kresling_chain as kresling_chain,
 )
-from ._lattice import Lattice as Lattice, grid as grid, ladder as ladder
+from ._lattice import Lattice as Lattice, grid as grid, grounded_ladder as grounded_ladder, ladder as ladder
 from ._nonpolynomial import (
     MagneticOscillator as MagneticOscillator,
     ShallowArch as ShallowArch,

@@ -10,10 +10,16 @@ a polynomial: a reconstruction can only approximate it.
   ground, and a linear rung between the rails at every level (24 elements, 8 loops).
 - Grid (`grid`): a 4 x 4 array of nodes, each held to the ground by a bistable element, with
   linear couplers between neighbours along rows and columns (40 elements).
+- Grounded ladder (`grounded_ladder`): a 2 x 8 ladder whose every node is held to the ground by a
+  bistable element, with linear couplers along the rails and linear rungs (38 elements, 7 loops).
+  Its first well is the deeper one, so from all second wells a snap at one end can run along the
+  rails as a transition wave (the serial ladder cannot carry one: at zero load its trusses in
+  series are independently bistable).
 
 The recorded configurations put every bistable element at each of its two wells: all in the
-first well, all in the second, and two complementary alternating patterns (along the rails for
-the ladder, a checkerboard for the grid). Each equilibrium is solved by Newton on the node force
+first well, all in the second, and two complementary patterns (alternating along the rails for
+the ladder, the checkerboards for the grid, the two halves of the rails for the grounded ladder,
+whose couplers are too stiff to hold an alternating pattern). Each equilibrium is solved by Newton on the node force
 balance B^T F(B u) = 0 from the configuration's wells and checked stable (the stiffness matrix
 B^T diag(F'(B u)) B positive definite).
 """
@@ -98,12 +104,17 @@ def stable_configuration(model: Lattice, u0) -> np.ndarray:
 
 
 def _system(name, graph, bistable, patterns, node_of_pattern, spring, description) -> System:
-    """A lattice `System` recorded around the configurations `patterns` (C, n_bistable) of 0/1 wells."""
+    """A lattice `System` recorded around the configurations `patterns` (C, n_bistable) of 0/1 wells;
+    `spring` the linear elements' stiffness (scalar or per element)."""
     model = _lattice(graph, bistable, spring, 0.05)
     wells = truss_wells()
     span = wells[-1] - wells[0]
     eq = np.stack([stable_configuration(model, node_of_pattern(wells[np.asarray(pt)])) for pt in patterns])
     dfm = np.asarray(graph.deformations(eq))  # (C, E)
+    held = (dfm[:, bistable] > 0.5 * (wells[0] + wells[-1])) == np.asarray(patterns, bool)
+    if not np.all(held):
+        raise ValueError(f"{name}: the couplings do not hold the recorded patterns of wells "
+                         f"({int(np.sum(~held))} elements leave theirs); use weaker couplings")
     lo = np.where(bistable, wells[0] - 0.25 * span, dfm.min(0) - 0.25 * span)
     hi = np.where(bistable, wells[-1] + 0.25 * span, dfm.max(0) + 0.25 * span)
     return System(
@@ -147,6 +158,25 @@ def grid(rows: int = 4, cols: int = 4, coupler: float = 0.2) -> System:
     patterns = [np.zeros(d, int), np.ones(d, int), board, 1 - board]
     return _system(f"grid{rows}x{cols}", graph, bistable, patterns, lambda w: w, coupler,
                    f"{rows} x {cols} grid of grounded bistable von Mises trusses with linear couplers")
+
+
+def grounded_ladder(levels: int = 8, coupler: float = 2.0, rung: float = 2.0) -> System:
+    """A 2 x `levels` ladder (`Lattice`, per unit mass) of nodes each held to the ground by a
+    bistable truss (rail A: nodes 0..levels-1, rail B: levels..2 levels-1), linear couplers of
+    stiffness `coupler` between neighbours along each rail and linear rungs of stiffness `rung`.
+    Elements: the grounding trusses (node order), rail A's couplers, rail B's, then the rungs.
+    Recorded around four configurations: all first wells, all second wells, and the rails' lower
+    half in one well and upper half in the other, both ways."""
+    n = levels
+    couplers = [(i - 1, i) for i in range(1, n)] + [(n + i - 1, n + i) for i in range(1, n)]
+    graph = Graph(2 * n, [(-1, i) for i in range(2 * n)] + couplers + [(i, i + n) for i in range(n)])
+    bistable = np.arange(graph.n_elements) < 2 * n
+    upper = np.tile((np.arange(n) >= n // 2).astype(int), 2)
+    patterns = [np.zeros(2 * n, int), np.ones(2 * n, int), upper, 1 - upper]
+    s = np.full(graph.n_elements, float(coupler))
+    s[2 * n + len(couplers):] = rung
+    return _system(f"grounded_ladder2x{n}", graph, bistable, patterns, lambda w: w, s,
+                   f"2 x {n} ladder of grounded bistable von Mises trusses with linear couplers and rungs")
 
 
 class MultiSine(AbstractInput):
