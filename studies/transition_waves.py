@@ -17,7 +17,7 @@ levels per second: the inverse of the median spacing of the levels' crossing tim
 at its launch does not count). Threshold: the smallest pull amplitude that propagates, by
 bisection to 1 % below the sweep's first propagating amplitude.
 
-    python studies/transition_waves.py [--seeds 0 1 2] [--amps 1 2 ... 30] [--frac 0.02] [--coupler 2] [--out results/transition_waves.md]
+    python studies/transition_waves.py [--seeds 0 1 2] [--amps 1 2 ... 40] [--frac 0.02] [--coupler 2] [--out results/transition_waves.md]
 """
 
 import argparse
@@ -114,11 +114,11 @@ def figure(res, levels, path, shown=10.0):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    ap.add_argument("--amps", type=float, nargs="+", default=[float(a) for a in range(1, 31)])
+    ap.add_argument("--amps", type=float, nargs="+", default=[float(a) for a in range(1, 41)])
     ap.add_argument("--frac", type=float, default=0.02)
     ap.add_argument("--f", type=float, default=1.0)
     ap.add_argument("--t1", type=float, default=40.0)
-    ap.add_argument("--coupler", type=float, default=2.0, help="rail couplers' and rungs' stiffness")
+    ap.add_argument("--coupler", type=float, default=1.8, help="rail couplers' and rungs' stiffness")
     ap.add_argument("--out", default=str(RESULTS / "transition_waves.md"))
     args = ap.parse_args()
     t_start = time.perf_counter()

@@ -46,9 +46,9 @@ def test_every_bistable_element_visits_both_wells(system):
 
 def test_lattice_recordings_follow_the_contract(system):
     span = np.ptp(system.x_range[0]) / 1.5
-    recs = gmr.systems.make_recordings(system, 0.02 * span, snr_db=50.0, seed=0, duration=20.0)
+    recs = gmr.systems.make_recordings(system, 0.03 * span, snr_db=50.0, seed=0)  # the whole record: nothing hops
     assert len(recs) == system.equilibria.shape[0]
-    n = int(round(20.0 * system.fs)) + 1
+    n = int(round(system.duration * system.fs)) + 1
     for rec, eq in zip(recs, system.equilibria):
         for key in ("x", "v", "a", "force"):
             assert getattr(rec, key).shape == (n, 16), key
@@ -56,7 +56,7 @@ def test_lattice_recordings_follow_the_contract(system):
         np.testing.assert_allclose(rec.x.mean(axis=0), eq, atol=0.1 * span)  # small vibrations about it
         vib = np.asarray(system.truth.topology.deformations(rec.x)) - np.asarray(system.truth.topology.deformations(eq))
         amplitude = np.sqrt(2.0) * vib.std(axis=0).max()
-        assert 0.005 * span < amplitude < 0.06 * span
+        assert 0.01 * span < amplitude < 0.06 * span
 
 
 def test_a_lattice_refuses_couplings_that_do_not_hold_its_recorded_patterns():
@@ -84,7 +84,7 @@ def test_a_pull_on_the_grounded_ladder_runs_a_front_or_is_pinned(grounded):
     truth = system.truth
     start, target = _ladder_ends(truth, system)
     weak, strong = (gmr.transition_front(truth, start, target, gmr.HalfSineNodes(1.0, -a, (0, n), n_dof=2 * n), 40.0,
-                                         levels) for a in (3.0, 20.0))
+                                         levels) for a in (3.0, 10.0))
     assert not bool(weak.propagated) and int(weak.reached) == -1 and np.isnan(float(weak.speed))
     assert np.allclose(np.asarray(weak.x)[-1], start, atol=0.05)  # back in the start configuration
     assert bool(strong.propagated) and int(strong.reached) == n - 1
@@ -120,7 +120,7 @@ def test_a_model_from_small_vibrations_runs_the_truths_fronts(grounded):
     span = float(np.diff(gmr.stable_wells(truth, system.x_range)[0])[0])
     recs = gmr.systems.make_recordings(system, 0.02 * span, snr_db=50.0, seed=3)
     model = gmr.reconstruct(recs, topology=graph, designs=system.designs).value
-    for a in (4.0, 10.0, 25.0):
+    for a in (4.0, 10.0, 20.0):
         ft, fm = (gmr.transition_front(m, *_ladder_ends(m, system), gmr.HalfSineNodes(1.0, -a, (0, n), n_dof=2 * n),
                                        40.0, levels) for m in (truth, model))
         assert bool(ft.propagated) == bool(fm.propagated), a

@@ -160,7 +160,7 @@ def grid(rows: int = 4, cols: int = 4, coupler: float = 0.2) -> System:
                    f"{rows} x {cols} grid of grounded bistable von Mises trusses with linear couplers")
 
 
-def grounded_ladder(levels: int = 8, coupler: float = 2.0, rung: float = 2.0) -> System:
+def grounded_ladder(levels: int = 8, coupler: float = 1.8, rung: float = 1.8) -> System:
     """A 2 x `levels` ladder (`Lattice`, per unit mass) of nodes each held to the ground by a
     bistable truss (rail A: nodes 0..levels-1, rail B: levels..2 levels-1), linear couplers of
     stiffness `coupler` between neighbours along each rail and linear rungs of stiffness `rung`.
