@@ -126,3 +126,20 @@ def test_a_model_from_small_vibrations_runs_the_truths_fronts(grounded):
         assert bool(ft.propagated) == bool(fm.propagated), a
         if bool(ft.propagated):
             assert float(fm.speed) == pytest.approx(float(ft.speed), rel=0.05)
+
+
+def test_transition_front_on_a_chain_follows_each_cells_deformation():
+    terms = [{"dof": i, "physics": p, "order": k, "coefficient": c} for i in range(3)
+             for p, k, c in (("stiffness", 1, -1.0), ("stiffness", 3, 1.0), ("velocity_damping", 1, 0.3))]
+    model = gmr.from_terms([1.0, 1.0, 1.0], terms, "chain")
+    start, target = np.ones(3), -np.ones(3)  # a chain's coordinates are its cells' deformations
+    fr = gmr.transition_front(model, start, target, gmr.HalfSineTip(0.5, -3.0, n_dof=3), 30.0, np.arange(3))
+    x, ts, times = np.asarray(fr.x), np.asarray(fr.ts), np.asarray(fr.times)
+    for i in range(3):  # the saddle of -x + x^3 between the wells is 0
+        first = np.argmax(x[:, i] < 0.0) if np.any(x[:, i] < 0.0) else None
+        if first is None:
+            assert np.isnan(times[i])
+        else:
+            assert ts[first - 1] <= times[i] <= ts[first]
+    assert np.any(np.isfinite(times))  # the pull at the tip switches a cell
+    assert bool(fr.propagated) == bool(np.all(np.abs(x[-1] + 1.0) < 0.5))

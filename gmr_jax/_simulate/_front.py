@@ -7,7 +7,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .._errors import GMRInputError
 from .._model._model import AbstractMechanicalModel
-from .._topology import as_graph
+from .._topology import as_graph, as_topology
 from ._inputs import AbstractInput
 from ._simulate import simulate
 
@@ -59,7 +59,8 @@ def transition_front(
 
     **Arguments:**
 
-    - `model`: a mechanical model on any topology (chains and independent DOFs are graphs here).
+    - `model`: a mechanical model on any topology (a chain's elements are its cells, independent
+      DOFs each one element).
     - `start`, `target`: node displacements (D,) of the configurations the front leaves and
       makes (`gmr.configuration`).
     - `load`: the input that starts the front (e.g. `HalfSineNodes` on the first level's nodes).
@@ -70,18 +71,19 @@ def transition_front(
     **Returns:** a `TransitionFront`.
     """
     d = model.n_dof
-    graph = as_graph(model.topology, d)
+    n_elements = as_graph(model.topology, d).n_elements
+    deformations = as_topology(model.topology).deformations  # a chain's x are its cells' deformations
     start, target = (np.asarray(u, float) for u in (start, target))
     levels = np.asarray(levels)
     if start.shape != (d,) or target.shape != (d,):
         raise GMRInputError(f"start and target must be node displacements of shape ({d},), got {start.shape} and "
                             f"{target.shape}; build them with gmr.configuration(model, wells, pattern)")
-    if levels.shape != (graph.n_elements,) or not np.issubdtype(levels.dtype, np.integer) or np.all(levels < 0):
-        raise GMRInputError(f"levels must be one whole number per element ({graph.n_elements}), -1 for an element "
+    if levels.shape != (n_elements,) or not np.issubdtype(levels.dtype, np.integer) or np.all(levels < 0):
+        raise GMRInputError(f"levels must be one whole number per element ({n_elements}), -1 for an element "
                             f"not watched, with at least one watched; got shape {levels.shape}")
     if not (np.isfinite(t1) and t1 > dt > 0):
         raise GMRInputError(f"t1 must exceed dt > 0, got t1 = {t1}, dt = {dt}")
-    d0, d1 = (np.asarray(graph.deformations(jnp.asarray(u))) for u in (start, target))
+    d0, d1 = (np.asarray(deformations(jnp.asarray(u))) for u in (start, target))
     watched = np.nonzero(levels >= 0)[0]
     if np.any(np.abs(d1[watched] - d0[watched]) == 0):
         raise GMRInputError("a watched element has the same deformation in start and target: nothing to cross; "
@@ -96,7 +98,7 @@ def transition_front(
             saddle[e] = zeros[0]
     ts = jnp.arange(int(np.floor(t1 / dt)) + 1) * dt
     x = np.asarray(simulate(model, load, ts, jnp.asarray(start), throw=False).value[0])
-    dfm = np.asarray(graph.deformations(jnp.asarray(x)))
+    dfm = np.asarray(deformations(jnp.asarray(x)))
     side = np.sign(d1 - d0)
     gap = (dfm - saddle) * side
     passed = gap > 0
