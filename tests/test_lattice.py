@@ -85,6 +85,7 @@ def test_a_pull_on_the_grounded_ladder_runs_a_front_or_is_pinned(grounded):
     start, target = _ladder_ends(truth, system)
     weak, strong = (gmr.transition_front(truth, start, target, gmr.HalfSineNodes(1.0, -a, (0, n), n_dof=2 * n), 40.0,
                                          levels) for a in (3.0, 10.0))
+    assert weak.result == gmr.RESULTS.successful and strong.result == gmr.RESULTS.successful
     assert not bool(weak.propagated) and int(weak.reached) == -1 and np.isnan(float(weak.speed))
     assert np.allclose(np.asarray(weak.x)[-1], start, atol=0.05)  # back in the start configuration
     assert bool(strong.propagated) and int(strong.reached) == n - 1
@@ -143,3 +144,10 @@ def test_transition_front_on_a_chain_follows_each_cells_deformation():
             assert ts[first - 1] <= times[i] <= ts[first]
     assert np.any(np.isfinite(times))  # the pull at the tip switches a cell
     assert bool(fr.propagated) == bool(np.all(np.abs(x[-1] + 1.0) < 0.5))
+
+
+def test_a_diverged_front_says_so():
+    terms = [{"dof": 0, "physics": "stiffness", "order": 3, "coefficient": -1.0}]  # no wells: runs away
+    model = gmr.from_terms([1.0], terms)
+    fr = gmr.transition_front(model, np.ones(1), -np.ones(1), gmr.HalfSineTip(1.0, 1.0, n_dof=1), 20.0, [0])
+    assert fr.result != gmr.RESULTS.successful and not bool(fr.propagated)

@@ -7,6 +7,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .._errors import GMRInputError
 from .._model._model import AbstractMechanicalModel
+from .._solution import RESULTS
 from .._topology import as_graph, as_topology
 from ._inputs import AbstractInput
 from ._simulate import simulate
@@ -22,13 +23,15 @@ class TransitionFront(eqx.Module):
     - `levels`: (E,) the level of each element (-1: not watched), as given.
     - `propagated`: every watched element passed its saddle and ends within a quarter of its
       start-to-target distance of its target deformation.
-    - `reached`: the highest level whose every element passed (-1: none).
+    - `reached`: the highest level that, with every level below it, passed entirely (-1: none).
     - `speed`: levels per unit time, the inverse of the median spacing of successive levels'
       crossing times (a level's time: the mean over its elements), over the levels strictly
       between the lowest (the loaded one) and the highest (the free end; all levels when fewer
       than two lie between); the median leaves out a dwell of the front at its launch. NaN
       unless `propagated`.
     - `ts`, `x`: the saved times (T,) and node displacements (T, D).
+    - `result`: the simulation's `RESULTS` code (a failed or diverged run: NaN values, nothing
+      passed, not propagated).
     """
 
     times: Float[Array, " elements"]
@@ -38,6 +41,7 @@ class TransitionFront(eqx.Module):
     speed: Float[Array, ""]
     ts: Float[Array, " times"]
     x: Float[Array, "times dof"]
+    result: RESULTS
 
 
 def transition_front(
@@ -97,7 +101,8 @@ def transition_front(
         if zeros:
             saddle[e] = zeros[0]
     ts = jnp.arange(int(np.floor(t1 / dt)) + 1) * dt
-    x = np.asarray(simulate(model, load, ts, jnp.asarray(start), throw=False).value[0])
+    sol = simulate(model, load, ts, jnp.asarray(start), throw=False)
+    x = np.asarray(sol.value[0])
     dfm = np.asarray(deformations(jnp.asarray(x)))
     side = np.sign(d1 - d0)
     gap = (dfm - saddle) * side
@@ -124,4 +129,5 @@ def transition_front(
         level_times = np.array([np.mean(times[levels == k]) for k in use])
         speed = float(1.0 / np.median(np.diff(level_times) / np.diff(use)))
     return TransitionFront(times=jnp.asarray(times), levels=jnp.asarray(levels), propagated=jnp.asarray(propagated),
-                           reached=jnp.asarray(reached), speed=jnp.asarray(speed), ts=ts, x=jnp.asarray(x))
+                           reached=jnp.asarray(reached), speed=jnp.asarray(speed), ts=ts, x=jnp.asarray(x),
+                           result=sol.result)
