@@ -123,7 +123,8 @@ def main():
     same_laws = np.all(pt == pl, axis=-1) & np.all(pt >= 0, axis=-1)
     e5 = int(np.nonzero(np.asarray(graph.incidence)[:, args.node] != 0)[0][0])  # the pulled node's truss
     lo_d = float(system.x_range[e5][0])
-    inside = np.abs(A)[:, None] <= abs(float(truth.restoring(jnp.full(graph.n_elements, lo_d))[e5]))
+    a_in = abs(float(truth.restoring(jnp.full(graph.n_elements, lo_d))[e5]))  # the truss force at the box's end
+    inside = np.abs(A)[:, None] <= a_in
     inside = np.broadcast_to(inside, same.shape)
     rng = np.random.default_rng(0)
     pick = rng.choice(f.size * A.size, size=min(args.peer, f.size * A.size), replace=False)
@@ -150,7 +151,7 @@ def main():
         f"| points where the model's pattern (every element's well) is the truth's | {100 * same.mean():.1f} % |",
         f"| points where the number of switched elements agrees | {100 * np.mean(ct == cm):.1f} % |",
         f"| the same with the model's laws and the truth's damping (pattern) | {100 * same_laws.mean():.1f} % |",
-        f"| pattern agreement inside the records' range (abs(A) <= {abs(float(truth.restoring(jnp.full(graph.n_elements, lo_d))[e5])):.1f}, "
+        f"| pattern agreement inside the records' range (abs(A) <= {a_in:.1f}, "
         f"{int(inside.sum())} points) | {100 * same[inside].mean():.1f} % (laws with the truth's damping "
         f"{100 * same_laws[inside].mean():.1f} %) |",
         "| truth's classes (elements switched: points) | " + ", ".join(f"{int(v)}: {c}" for v, c in zip(vals, cnt))

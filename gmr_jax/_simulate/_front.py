@@ -7,6 +7,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .._errors import GMRInputError
 from .._model._model import AbstractMechanicalModel
+from ..metrics._metrics import equilibria
 from .._solution import RESULTS
 from .._topology import as_graph, as_topology
 from ._inputs import AbstractInput
@@ -93,8 +94,6 @@ def transition_front(
         raise GMRInputError("a watched element has the same deformation in start and target: nothing to cross; "
                             "watch only the elements the front switches")
     saddle = 0.5 * (d0 + d1)
-    from ..metrics._metrics import equilibria
-
     for e in watched:
         lo, hi = sorted((d0[e], d1[e]))
         zeros = [x for x, stable in equilibria(model, int(e), (lo, hi)) if not stable]
@@ -117,12 +116,9 @@ def transition_front(
     crossed = np.isfinite(times)
     propagated = bool(np.all(crossed[watched]) and np.all(ended[watched]))
     ranks = np.unique(levels[watched])
-    full = [k for k in ranks if np.all(crossed[levels == k])]
-    reached = -1
-    for k in ranks:  # the highest level up to which every level passed
-        if k not in full:
-            break
-        reached = int(k)
+    whole = np.array([np.all(crossed[levels == k]) for k in ranks])
+    first_short = int(np.argmin(whole)) if not np.all(whole) else ranks.size
+    reached = int(ranks[first_short - 1]) if first_short > 0 else -1
     speed = np.nan
     use = ranks[1:-1] if ranks.size >= 4 else ranks
     if propagated and use.size >= 2:

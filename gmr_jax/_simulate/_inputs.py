@@ -68,6 +68,16 @@ class BaseSine(AbstractInput):
         return -self.amplitude * w**2 * jnp.sin(w * t), jnp.zeros(self.n_dof)
 
 
+def _half_sine(t, frequency, amplitude):
+    """Eq. (25): A sin(2π f t) for t <= 1/(2f), then 0."""
+    return jnp.where(t <= 0.5 / frequency, amplitude * jnp.sin(2 * jnp.pi * frequency * t), 0.0)
+
+
+def _half_sine_end(frequency):
+    """The half-sine's end 1/(2f), as the (1,) jump times of its input."""
+    return jnp.reshape(0.5 / jnp.asarray(frequency, float), (1,))
+
+
 class HalfSineTip(AbstractInput):
     """Paper Eq. (25): tip force A sin(2π f t) for t <= 1/(2f), then 0, on the last mass."""
 
@@ -76,12 +86,11 @@ class HalfSineTip(AbstractInput):
     n_dof: int = eqx.field(static=True, default=1)
 
     def __call__(self, t):
-        on = t <= 0.5 / self.frequency
-        f = jnp.where(on, self.amplitude * jnp.sin(2 * jnp.pi * self.frequency * t), 0.0)
+        f = _half_sine(t, self.frequency, self.amplitude)
         return jnp.zeros(()), jnp.zeros(self.n_dof).at[-1].set(f)
 
     def jump_times(self):
-        return jnp.reshape(0.5 / jnp.asarray(self.frequency, float), (1,))
+        return _half_sine_end(self.frequency)
 
 
 class HalfSineNodes(AbstractInput):
@@ -98,12 +107,11 @@ class HalfSineNodes(AbstractInput):
             raise ValueError(f"nodes must be mass indices in 0..{self.n_dof - 1}, got {self.nodes}")
 
     def __call__(self, t):
-        on = t <= 0.5 / self.frequency
-        f = jnp.where(on, self.amplitude * jnp.sin(2 * jnp.pi * self.frequency * t), 0.0)
+        f = _half_sine(t, self.frequency, self.amplitude)
         return jnp.zeros(()), jnp.zeros(self.n_dof).at[jnp.asarray(self.nodes)].set(f)
 
     def jump_times(self):
-        return jnp.reshape(0.5 / jnp.asarray(self.frequency, float), (1,))
+        return _half_sine_end(self.frequency)
 
 
 class HalfSineBase(AbstractInput):
@@ -116,12 +124,11 @@ class HalfSineBase(AbstractInput):
     n_dof: int = eqx.field(static=True, default=1)
 
     def __call__(self, t):
-        on = t <= 0.5 / self.frequency
-        b = jnp.where(on, self.amplitude * jnp.sin(2 * jnp.pi * self.frequency * t), 0.0)
+        b = _half_sine(t, self.frequency, self.amplitude)
         return b, jnp.zeros(self.n_dof)
 
     def jump_times(self):
-        return jnp.reshape(0.5 / jnp.asarray(self.frequency, float), (1,))
+        return _half_sine_end(self.frequency)
 
 
 def half_sine(load: str, f, A, n_dof: int) -> AbstractInput:

@@ -19,9 +19,9 @@ a polynomial: a reconstruction can only approximate it.
 The recorded configurations put every bistable element at each of its two wells: all in the
 first well, all in the second, and two complementary patterns (alternating along the rails for
 the ladder, the checkerboards for the grid, the two halves of the rails for the grounded ladder,
-whose couplers are too stiff to hold an alternating pattern). Each equilibrium is solved by Newton on the node force
-balance B^T F(B u) = 0 from the configuration's wells and checked stable (the stiffness matrix
-B^T diag(F'(B u)) B positive definite).
+whose couplers are too stiff to hold an alternating pattern). Each equilibrium is solved by Newton
+on the node force balance B^T F(B u) = 0 from the configuration's wells and checked stable (the
+stiffness matrix B^T diag(F'(B u)) B positive definite) and to hold its pattern.
 """
 
 import equinox as eqx
